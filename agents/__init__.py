@@ -1,0 +1,1 @@
+"""PPO agents (Stable-Baselines3) trained on the Wall Inspector tasks."""

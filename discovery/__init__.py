@@ -1,0 +1,1 @@
+"""Model discovery: find where simulation and flight data disagree, name the missing effect, fit it."""

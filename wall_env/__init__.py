@@ -1,0 +1,51 @@
+"""Wall Inspector environments: quadrotors near walls with the paper's wall-suction dynamics.
+
+``import wall_env`` registers the tasks with Gymnasium under the ``WallInspector`` namespace::
+
+    import gymnasium as gym
+    import wall_env
+
+    env = gym.make("WallInspector/WallSweep-v0", k_s=4.1, d_thr=0.132)
+"""
+
+from gymnasium.envs.registration import register, registry
+
+from wall_env.actions import ActionMapping
+from wall_env.aero import AeroModel
+from wall_env.effects import EFFECTS, Effect, effects_from_spec, make_effect
+from wall_env.env import DEFAULT_REWARD_WEIGHTS, WallInspectorEnv
+from wall_env.model_file import FlightModel, nominal_aero_model
+from wall_env.observation import OBSERVATION_FIELDS, parse_observation
+from wall_env.references import Reference
+from wall_env.scene import Scene, Wall
+from wall_env.tasks import TASKS
+from wall_env.vehicle import GRAVITY, VehicleParams
+
+__all__ = [
+    "ENV_IDS",
+    "WallInspectorEnv",
+    "VehicleParams",
+    "Scene",
+    "Wall",
+    "AeroModel",
+    "FlightModel",
+    "ActionMapping",
+    "Reference",
+    "EFFECTS",
+    "Effect",
+    "make_effect",
+    "effects_from_spec",
+    "nominal_aero_model",
+    "OBSERVATION_FIELDS",
+    "parse_observation",
+    "DEFAULT_REWARD_WEIGHTS",
+    "GRAVITY",
+    "TASKS",
+]
+
+ENV_IDS = tuple(f"WallInspector/{name}-v0" for name in TASKS)
+
+for _name in TASKS:
+    _id = f"WallInspector/{_name}-v0"
+    if _id not in registry:
+        register(id=_id, entry_point="wall_env.env:WallInspectorEnv", kwargs={"task": _name})

@@ -1,0 +1,105 @@
+"""``wall-inspector bench-env``: environment speed with random actions.
+
+For every task with its default settings: env steps per second in one process with
+random actions (resets included, through ``gym.make`` and its wrappers), the median
+``reset()`` time, and the steps per second of a 2-process vector env
+(``gymnasium.vector.AsyncVectorEnv``). ``--json`` writes the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import wall_env
+
+TARGET_STEPS_PER_S = 5000.0
+TARGET_RESET_MS = 1.0
+
+
+def measure_single(env_id: str, steps: int, seed: int = 0) -> dict[str, float]:
+    env = gym.make(env_id)
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+    for _ in range(200):  # warm-up: first calls load the compiled dynamics
+        env.step(env.action_space.sample())
+    env.reset(seed=seed)
+    reset_times = []
+    start = time.perf_counter()
+    for _ in range(steps):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            t0 = time.perf_counter()
+            env.reset()
+            reset_times.append(time.perf_counter() - t0)
+    elapsed = time.perf_counter() - start
+    # reset time on its own, so every task reports a median over many resets
+    for _ in range(200):
+        t0 = time.perf_counter()
+        env.reset()
+        reset_times.append(time.perf_counter() - t0)
+    env.close()
+    return {
+        "steps_per_s": steps / elapsed,
+        "reset_median_ms": 1e3 * float(np.median(reset_times)),
+        "episodes_in_run": len(reset_times) - 200,
+    }
+
+
+def measure_vector(env_id: str, steps: int, n_envs: int = 2, seed: int = 0) -> float:
+    envs = gym.vector.AsyncVectorEnv([lambda: gym.make(env_id) for _ in range(n_envs)])
+    envs.reset(seed=seed)
+    envs.action_space.seed(seed)
+    for _ in range(100):
+        envs.step(envs.action_space.sample())
+    n_calls = steps // n_envs
+    start = time.perf_counter()
+    for _ in range(n_calls):
+        envs.step(envs.action_space.sample())  # autoreset handles episode ends
+    elapsed = time.perf_counter() - start
+    envs.close()
+    return n_calls * n_envs / elapsed
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--steps", type=int, default=20000, help="env steps per measurement (default 20000)")
+    parser.add_argument("--envs", nargs="*", default=list(wall_env.ENV_IDS), help="environment ids (default: all)")
+    parser.add_argument("--n-envs", type=int, default=2, help="processes of the vector env (default 2)")
+    parser.add_argument("--json", metavar="FILE", help="write the figures to this JSON file")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.steps < 100:
+        raise SystemExit("--steps must be at least 100")
+    results = {}
+    header = f"{'environment':32s} {'steps/s':>10s} {'reset ms':>9s} {f'{args.n_envs}-proc steps/s':>16s}"
+    print(header)
+    print("-" * len(header))
+    for env_id in args.envs:
+        single = measure_single(env_id, args.steps)
+        vector = measure_vector(env_id, args.steps, args.n_envs)
+        results[env_id] = {**single, "vector_steps_per_s": vector, "vector_processes": args.n_envs}
+        print(f"{env_id:32s} {single['steps_per_s']:10.0f} {single['reset_median_ms']:9.3f} {vector:16.0f}")
+    worst_speed = min(r["steps_per_s"] for r in results.values())
+    worst_reset = max(r["reset_median_ms"] for r in results.values())
+    ok = worst_speed >= TARGET_STEPS_PER_S and worst_reset < TARGET_RESET_MS
+    print(f"\ntargets: >= {TARGET_STEPS_PER_S:.0f} steps/s in one process, median reset < {TARGET_RESET_MS} ms: "
+          f"{'met' if ok else 'NOT met'} (slowest {worst_speed:.0f} steps/s, slowest reset {worst_reset:.3f} ms)")
+    if args.json:
+        payload = {
+            "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
+            "steps": args.steps,
+            "targets": {"steps_per_s": TARGET_STEPS_PER_S, "reset_median_ms": TARGET_RESET_MS},
+            "targets_met": ok,
+            "results": results,
+        }
+        with open(args.json, "w") as fh:
+            json.dump(payload, fh, indent=2)
+        print(f"wrote {args.json}")
+    return 0

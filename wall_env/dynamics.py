@@ -1,0 +1,214 @@
+"""The simulator's flight dynamics, one control step as one compiled CasADi function.
+
+State ``x`` (17 numbers): ``p_world`` (3, m), ``q_body_to_world`` (4, [w, x, y, z]),
+``v_world`` (3, m/s), ``omega_body`` (3, rad/s), ``rotor_thrusts`` (4, N).
+
+Input ``u`` (4 numbers): collective thrust command ``T`` (N) and body-rate command
+``omega_cmd`` (3, rad/s), command noise already added, held over the control step.
+
+At the physics rate (``substeps`` per control step, RK4 each) the vehicle's inner loop
+does what a flight controller's rate loop does:
+
+1. body-rate controller: ``tau_des = J K (omega_cmd - omega) + omega x J omega``;
+2. mixer: rotor thrusts ``f_des = mixer [T; tau_des]``, clipped to ``[0, thrust_max / 4]``;
+3. optional first-order motor lag ``df/dt = (f_des - f) / tau_m`` (otherwise ``f = f_des``);
+4. rigid body (paper Eq. 3 with Eq. 5's extra force):
+   ``dp/dt = v``, ``dv/dt = -g e3 + (R e3 sum(f) + F_aero) / m``,
+   ``dq/dt = q * [0, omega] / 2``, ``J domega/dt = tau(f) + M_aero - omega x J omega``
+
+where ``F_aero, M_aero`` is the :class:`~wall_env.aero.AeroModel` wrench (drag, wall
+suction and any other effects), the same symbolic definition the MPC and the
+identification code use.
+
+Why 1 kHz physics under 100 Hz control: the rate loop has a 20 ms time constant and
+motor lag can be a few ms; ten RK4 substeps keep the integration error of those fast
+modes far below the command noise, and because the whole control step is one native
+call the substeps cost microseconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from wall_env.aero import AeroModel, symbolic_scene
+from wall_env.codegen import CompiledFunction
+from wall_env.effects import FlightContext
+from wall_env.rotations import quat_multiply, quat_to_rotation
+from wall_env.scene import Scene
+from wall_env.vehicle import GRAVITY, VehicleParams
+
+__all__ = ["STATE_SIZE", "StateIndex", "build_step_function", "Simulator"]
+
+STATE_SIZE = 17
+
+
+class StateIndex:
+    """Slices of the simulator state vector."""
+
+    p_world = slice(0, 3)
+    q_body_to_world = slice(3, 7)
+    v_world = slice(7, 10)
+    omega_body = slice(10, 13)
+    rotor_thrusts = slice(13, 17)
+
+
+def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structure: tuple) -> ca.Function:
+    x = ca.SX.sym("x", STATE_SIZE)
+    u = ca.SX.sym("u", 4)
+    mass = ca.SX.sym("mass")
+    theta = ca.SX.sym("theta", model.param_size)
+    scene_symbols, scene_vector = symbolic_scene(scene_structure)
+
+    p, q, v, omega, f = (x[s] for s in (StateIndex.p_world, StateIndex.q_body_to_world, StateIndex.v_world,
+                                        StateIndex.omega_body, StateIndex.rotor_thrusts))
+    q_unit = q / ca.norm_2(q)
+    R = quat_to_rotation(q_unit)
+    J = ca.DM(vehicle.inertia)
+    gains = ca.DM(vehicle.rate_gains)
+    gyro = ca.cross(omega, J * omega)
+
+    tau_des = J * gains * (u[1:4] - omega) + gyro
+    f_des = ca.DM(vehicle.mixer_matrix) @ ca.vertcat(u[0], tau_des)
+    f_des = ca.fmin(ca.fmax(f_des, 0.0), vehicle.rotor_thrust_max)
+    if vehicle.motor_time_constant > 0:
+        f_act = f
+        f_dot = (f_des - f) / vehicle.motor_time_constant
+    else:
+        f_act = f_des
+        f_dot = ca.SX.zeros(4)
+
+    ctx = FlightContext(p, R, v, omega, f_act, vehicle.rotor_positions_array, mass, GRAVITY, scene_symbols)
+    aero, effect_forces = model.wrench(ctx, theta, scene_structure)
+    allocation = ca.DM(vehicle.allocation_matrix)
+    thrust = ca.sum1(f_act)
+    moments = allocation[1:4, :] @ f_act
+
+    p_dot = v
+    v_dot = (R[:, 2] * thrust + aero.force_world) / mass - ca.DM([0.0, 0.0, GRAVITY])
+    q_dot = 0.5 * quat_multiply(q_unit, ca.vertcat(0, omega))
+    omega_dot = (moments + aero.moment_body - gyro) / J
+    x_dot = ca.vertcat(p_dot, q_dot, v_dot, omega_dot, f_dot)
+    forces = ca.horzcat(*effect_forces) if effect_forces else ca.SX.zeros(3, 0)
+    return ca.Function("flight_dynamics", [x, u, mass, theta, scene_vector], [x_dot, forces, f_act])
+
+
+def _rk4_substep(dynamics: ca.Function, h: float, lagged: bool) -> ca.Function:
+    x = ca.SX.sym("x", STATE_SIZE)
+    u = ca.SX.sym("u", 4)
+    args = [ca.SX.sym(dynamics.name_in(i), dynamics.sparsity_in(i)) for i in range(2, dynamics.n_in())]
+    k1, forces, _ = dynamics(x, u, *args)
+    k2 = dynamics(x + h / 2 * k1, u, *args)[0]
+    k3 = dynamics(x + h / 2 * k2, u, *args)[0]
+    k4 = dynamics(x + h * k3, u, *args)[0]
+    x_next = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    q = x_next[StateIndex.q_body_to_world]
+    x_next[StateIndex.q_body_to_world] = q / ca.norm_2(q)
+    if not lagged:  # rotor thrusts are algebraic: report those of the new state
+        x_next[StateIndex.rotor_thrusts] = dynamics(x_next, u, *args)[2]
+    return ca.Function("rk4_substep", [x, u, *args], [x_next, forces])
+
+
+@lru_cache(maxsize=32)
+def build_step_function(
+    vehicle: VehicleParams, structure_key: tuple, scene_structure: tuple, control_dt: float, substeps: int
+) -> ca.Function:
+    """CasADi function of one control step.
+
+    ``control_step(x[17], u[4], mass, theta, scene) -> (x_next[17],
+    effect_forces_mean[3 x n_effects], rotor_wall_distances[n_walls x 4], R_body_to_world[3x3])``
+
+    The effect forces are averaged over the substeps; the rotor-wall distances are
+    the signed distances of the rotor centres of ``x_next`` to each wall, and the
+    rotation matrix is that of ``x_next``.
+    ``vehicle`` enters with its mass ignored (mass is an input, so it can be
+    randomised without rebuilding).
+    """
+    from wall_env.effects import make_effect
+
+    model = AeroModel([make_effect(name, **dict(options)) for name, options in structure_key])
+    dynamics = _continuous_dynamics(vehicle, model, scene_structure)
+    substep = _rk4_substep(dynamics, control_dt / substeps, vehicle.motor_time_constant > 0)
+
+    x = ca.MX.sym("x", STATE_SIZE)
+    u = ca.MX.sym("u", 4)
+    mass = ca.MX.sym("mass")
+    theta = ca.MX.sym("theta", model.param_size)
+    scene = ca.MX.sym("scene", dynamics.size1_in(4))
+    forces_sum = ca.MX.zeros(3, len(model.effects))
+    state = x
+    for _ in range(substeps):
+        state, forces = substep(state, u, mass, theta, scene)
+        forces_sum += forces
+
+    # rotor-wall distances of the final state
+    xs = ca.SX.sym("x", STATE_SIZE)
+    scene_symbols, scene_vector = symbolic_scene(scene_structure)
+    R = quat_to_rotation(xs[StateIndex.q_body_to_world])
+    rotors = vehicle.rotor_positions_array
+    rows = []
+    for point, normal in zip(scene_symbols.wall_points, scene_symbols.wall_normals):
+        rows.append(ca.horzcat(*[ca.dot(normal, xs[0:3] + R @ ca.DM(rotors[j]) - point) for j in range(4)]))
+    distances = ca.vertcat(*rows) if rows else ca.SX.zeros(0, 4)
+    geometry = ca.Function("geometry", [xs, scene_vector], [distances, R])
+    distances_next, R_next = geometry(state, scene)
+
+    return ca.Function(
+        "control_step",
+        [x, u, mass, theta, scene],
+        [state, forces_sum / substeps, distances_next, R_next],
+        ["x", "u", "mass", "theta", "scene"],
+        ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world"],
+    )
+
+
+class Simulator:
+    """Numeric front end of the compiled control step for one vehicle, model and scene structure."""
+
+    def __init__(self, vehicle: VehicleParams, model: AeroModel, scene: Scene, control_dt: float, substeps: int):
+        self.vehicle = vehicle
+        self.model = model
+        self.scene = scene
+        self.control_dt = control_dt
+        self.substeps = substeps
+        key_vehicle = dataclasses.replace(vehicle, mass=1.0)
+        function = build_step_function(key_vehicle, model.structure_key, scene.structure, control_dt, substeps)
+        self._step = CompiledFunction(function)
+        self.mass = vehicle.mass
+        self.theta = model.theta()
+        self.scene_vector = scene.to_vector()
+        self.n_walls = len(scene.walls)
+
+    def set_parameters(self, *, mass: float | None = None, theta: np.ndarray | None = None,
+                       scene: Scene | None = None) -> None:
+        """Change numeric values between episodes (the compiled code stays the same)."""
+        if mass is not None:
+            self.mass = float(mass)
+        if theta is not None:
+            self.theta = np.asarray(theta, dtype=float)
+        if scene is not None:
+            if scene.structure != self.scene.structure:
+                raise ValueError("a scene with another number of walls, ground or ceiling needs a new Simulator")
+            self.scene = scene
+            self.scene_vector = scene.to_vector()
+
+    def step(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Advance one control step.
+
+        Returns ``x_next``, the effect forces ``(3, n_effects)`` (mean over the step), the
+        rotor-wall distances ``(n_walls, 4)`` and ``R_body_to_world`` ``(3, 3)`` of ``x_next``.
+        """
+        x_next, forces, distances, R = self._step(x, u, self.mass, self.theta, self.scene_vector)
+        return (x_next, forces.reshape(3, -1, order="F"), distances.reshape(self.n_walls, 4, order="F"),
+                R.reshape(3, 3, order="F"))
+
+    def hover_state(self, p_world: np.ndarray, q_body_to_world: np.ndarray = (1.0, 0.0, 0.0, 0.0)) -> np.ndarray:
+        """A state at rest with every rotor carrying a quarter of the weight."""
+        x = np.zeros(STATE_SIZE)
+        x[StateIndex.p_world] = p_world
+        x[StateIndex.q_body_to_world] = q_body_to_world
+        x[StateIndex.rotor_thrusts] = self.mass * GRAVITY / 4.0
+        return x

@@ -1,0 +1,44 @@
+"""Ground effect: each rotor's thrust grows near the ground plane.
+
+Per rotor j at height ``h_j`` of its centre above the ground, the thrust gain is the
+Cheeseman-Bennett image-rotor result (Cheeseman & Bennett, "The effect of the ground
+on a helicopter rotor in forward flight", ARC R&M 3021, 1955):
+
+    T_IGE / T_OGE = 1 / (1 - (r / (4 h_j))^2)
+
+with ``r`` an effective rotor radius, the one parameter (for multirotors the gain is
+larger than for one isolated rotor, see Sanchez-Cuevas et al., "Characterization of
+the aerodynamic ground effect and its influence in multirotor control", IJAE 2017;
+an effective radius absorbs that). The height is clamped at ``r / 2`` so the gain
+stays finite (at most 4/3). The extra thrust ``(gain - 1) f_j`` acts along +z_body at
+the rotor, so unequal heights also give a moment.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from wall_env.effects.base import Effect, FlightContext, Parameter, Wrench
+
+
+def image_rotor_gain(radius: ca.SX, distance: ca.SX) -> ca.SX:
+    """Thrust ratio ``1 / (1 - (r / 4h)^2)`` with the distance clamped at ``r / 2``."""
+    h = ca.fmax(distance, radius / 2.0)
+    return 1.0 / (1.0 - (radius / (4.0 * h)) ** 2)
+
+
+class GroundEffect(Effect):
+    name = "ground_effect"
+    description = "per-rotor thrust gain near the ground plane"
+    reference = "Cheeseman & Bennett 1955 (ARC R&M 3021)"
+    parameters = (Parameter("radius", "m", 0.06, 1e-3, 0.5, "effective rotor radius of the image-rotor model"),)
+
+    def applies_to(self, scene_structure: tuple[int, bool, bool]) -> bool:
+        return scene_structure[1]
+
+    def wrench(self, ctx: FlightContext, theta: dict[str, ca.SX]) -> Wrench:
+        extra = []
+        for j in range(4):
+            height = ctx.rotor_position_world(j)[2] - ctx.scene.ground_z
+            extra.append((image_rotor_gain(theta["radius"], height) - 1.0) * ctx.rotor_thrusts[j])
+        return Wrench.from_rotor_thrust_changes(ctx, extra)

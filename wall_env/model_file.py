@@ -1,0 +1,95 @@
+"""Model files: a vehicle plus the effects it meets, with parameter uncertainties.
+
+The JSON form, written by model discovery and read by the environments and SC-MPC::
+
+    {
+      "vehicle": {"mass": 1.0, "drag": [0.3, 0.3, 0.2], ...},      # VehicleParams fields
+      "effects": [
+        {"name": "wall_suction", "params": {"k_s": 4.1, "d_thr": 0.132},
+         "param_std": {"k_s": 0.05, "d_thr": 0.002}, "options": {"thrust_scaling": false}}
+      ]
+    }
+
+The vehicle's ``drag`` is the nominal ``linear_drag``; a ``linear_drag`` entry in
+``effects`` is drag found on top of it, and :meth:`FlightModel.aero_model` adds the two.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wall_env.aero import AeroModel
+from wall_env.effects import Effect, effects_from_spec, make_effect
+from wall_env.vehicle import VehicleParams
+
+__all__ = ["FlightModel", "nominal_aero_model"]
+
+
+def nominal_aero_model(vehicle: VehicleParams) -> AeroModel:
+    """What a vehicle file alone predicts: its linear body drag (paper Eq. 4)."""
+    return AeroModel([make_effect("linear_drag", D=vehicle.drag)])
+
+
+@dataclass
+class FlightModel:
+    vehicle: VehicleParams = field(default_factory=VehicleParams)
+    effects: list[Effect] = field(default_factory=list)
+    param_std: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    def aero_model(self) -> AeroModel:
+        """The vehicle's nominal drag plus every effect (extra linear drag added to the nominal)."""
+        model = nominal_aero_model(self.vehicle)
+        for effect in self.effects:
+            if effect.name == "linear_drag":
+                total = np.asarray(self.vehicle.drag) + effect.values["D"]
+                effect = make_effect("linear_drag", D=total)
+            model = model.with_effect(effect)
+        return model
+
+    def effect(self, name: str) -> Effect | None:
+        return next((e for e in self.effects if e.name == name), None)
+
+    # ------------------------------------------------------------------ I/O
+    def to_dict(self) -> dict[str, Any]:
+        records = []
+        for effect in self.effects:
+            record = effect.to_dict()
+            if effect.name in self.param_std:
+                record["param_std"] = self.param_std[effect.name]
+            records.append(record)
+        return {"vehicle": self.vehicle.to_dict(), "effects": records}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], source: str = "model") -> FlightModel:
+        unknown = sorted(set(data) - {"vehicle", "effects"})
+        if unknown:
+            raise ValueError(f"{source}: unknown key(s) {unknown}; a model file has 'vehicle' and 'effects'")
+        try:
+            vehicle = VehicleParams.from_dict(data.get("vehicle") or {})
+            records = data.get("effects") or []
+            effects = effects_from_spec(records)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: {exc}") from exc
+        stds = {r["name"]: r["param_std"] for r in records if isinstance(r, dict) and "param_std" in r}
+        return cls(vehicle, effects, stds)
+
+    @classmethod
+    def load(cls, path: str | Path) -> FlightModel:
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise FileNotFoundError(f"model file {path} does not exist") from None
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"model file {path} is not valid JSON: {exc}") from None
+        if not isinstance(data, dict):
+            raise ValueError(f"model file {path} must hold a JSON object")
+        return cls.from_dict(data, source=str(path))
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2))
