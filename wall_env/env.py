@@ -346,6 +346,8 @@ class WallInspectorEnv(gym.Env):
             surface = contacts[0].surface
             self._collisions += 1
             x_next = self._bounce(x_next, contacts)
+            rotors_world = x_next[StateIndex.p_world] + self.vehicle.rotor_positions_array @ R.T
+            distances = self.scene.wall_distances(rotors_world)
         self._x = x_next
         self._R = R
         self._rotor_distances = distances
