@@ -72,6 +72,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--envs", nargs="*", default=list(wall_env.ENV_IDS), help="environment ids (default: all)")
     parser.add_argument("--n-envs", type=int, default=2, help="processes of the vector env (default 2)")
     parser.add_argument("--json", metavar="FILE", help="write the figures to this JSON file")
+    parser.add_argument("--markdown", metavar="FILE", help="write the table as Markdown (for `wall-inspector readme`)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -91,6 +92,19 @@ def run(args: argparse.Namespace) -> int:
     ok = worst_speed >= TARGET_STEPS_PER_S and worst_reset < TARGET_RESET_MS
     print(f"\ntargets: >= {TARGET_STEPS_PER_S:.0f} steps/s in one process, median reset < {TARGET_RESET_MS} ms: "
           f"{'met' if ok else 'NOT met'} (slowest {worst_speed:.0f} steps/s, slowest reset {worst_reset:.3f} ms)")
+    if args.markdown:
+        lines = [
+            f"| environment | steps/s (1 process) | median reset (ms) | steps/s ({args.n_envs} processes) |",
+            "|---|---:|---:|---:|",
+            *[f"| `{env_id}` | {r['steps_per_s']:,.0f} | {r['reset_median_ms']:.3f} | {r['vector_steps_per_s']:,.0f} |"
+              for env_id, r in results.items()],
+            "",
+            f"Random actions, resets included, {args.steps:,} steps per figure, measured by "
+            f"`wall-inspector bench-env` on {os.cpu_count()} cores (Python {platform.python_version()}).",
+        ]
+        with open(args.markdown, "w") as fh:
+            fh.write("\n".join(lines) + "\n")
+        print(f"wrote {args.markdown}")
     if args.json:
         payload = {
             "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
