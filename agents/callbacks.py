@@ -1,0 +1,104 @@
+"""Training callbacks: progress bar, periodic checkpoints, saving the best model.
+
+Each checkpoint is written with :func:`agents.checkpoints.save_checkpoint`, so the
+normalisation statistics always travel with the model and every checkpoint (periodic,
+best, final) can be loaded by :func:`agents.load_policy` or resumed from.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from agents.checkpoints import save_checkpoint
+
+__all__ = ["ProgressBar", "PeriodicCheckpoint", "SaveBestCheckpoint", "TrainingClock"]
+
+
+class TrainingClock:
+    """Cumulative training wall time (s) and timesteps, carried across resumed runs."""
+
+    def __init__(self, previous_wall_time_s: float = 0.0):
+        self.previous = float(previous_wall_time_s)
+        self.start = time.perf_counter()
+
+    @property
+    def this_run_s(self) -> float:
+        return time.perf_counter() - self.start
+
+    @property
+    def total_s(self) -> float:
+        return self.previous + self.this_run_s
+
+
+class ProgressBar(BaseCallback):
+    """A tqdm bar over environment steps, showing the current throughput."""
+
+    def __init__(self, total_timesteps: int, initial: int = 0):
+        super().__init__()
+        self.total, self.initial = int(total_timesteps), int(initial)
+        self.bar = None
+
+    def _on_training_start(self) -> None:
+        from tqdm.auto import tqdm
+
+        self.bar = tqdm(total=self.total, initial=self.initial, unit="step", unit_scale=True, dynamic_ncols=True,
+                        desc="PPO")
+
+    def _on_step(self) -> bool:
+        self.bar.update(self.training_env.num_envs)
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _policy_info(model, clock: TrainingClock, base_info: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    return {**base_info, "num_timesteps": int(model.num_timesteps), "wall_time_s": round(clock.total_s, 3), **extra}
+
+
+class PeriodicCheckpoint(BaseCallback):
+    """Every ``every`` env steps, save a checkpoint into ``folder/<steps>/``."""
+
+    def __init__(self, folder: Path, every: int, policy_info: dict[str, Any], clock: TrainingClock,
+                 check_observations: np.ndarray):
+        super().__init__()
+        self.folder, self.every = Path(folder), int(every)
+        self.policy_info, self.clock, self.check_observations = policy_info, clock, check_observations
+        self._next = None
+
+    def _on_training_start(self) -> None:
+        self._next = (self.model.num_timesteps // self.every + 1) * self.every
+
+    def _on_step(self) -> bool:
+        if self.model.num_timesteps >= self._next:
+            save_checkpoint(self.folder / f"{self.model.num_timesteps:09d}", self.model, self.model.get_vec_normalize_env(),
+                            _policy_info(self.model, self.clock, self.policy_info), self.check_observations)
+            self._next += self.every
+        return True
+
+
+class SaveBestCheckpoint(BaseCallback):
+    """Child of ``EvalCallback``: on a new best mean evaluation return, save into ``folder``."""
+
+    def __init__(self, folder: Path, policy_info: dict[str, Any], clock: TrainingClock, check_observations: np.ndarray,
+                 on_save: Callable[[], None] | None = None):
+        super().__init__()
+        self.folder = Path(folder)
+        self.policy_info, self.clock, self.check_observations = policy_info, clock, check_observations
+        self.on_save = on_save
+
+    def _on_step(self) -> bool:
+        best = float(self.parent.best_mean_reward)
+        save_checkpoint(self.folder, self.model, self.model.get_vec_normalize_env(),
+                        _policy_info(self.model, self.clock, self.policy_info, eval_mean_return=best),
+                        self.check_observations)
+        if self.on_save is not None:
+            self.on_save()
+        return True

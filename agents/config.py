@@ -1,0 +1,219 @@
+"""Training configuration: one YAML file per task in ``agents/configs/``, plus overrides.
+
+A configuration says everything a training run needs besides its output folder:
+which environment (and its keyword arguments), the domain-randomisation ranges,
+the residual base controller, the vector env, PPO's hyperparameters, the network,
+the normalisation and the evaluation/checkpoint schedule. ``wall-inspector train``
+loads the task's file, applies command-line flags and ``--set key=value`` overrides
+(dotted keys, YAML values: ``--set ppo.n_steps=128``), and saves the result as
+``config.yaml`` in the run folder, so that a run can be resumed and repeated exactly.
+
+Task names are accepted in any of the forms ``WallSweep``, ``WallSweep-v0``,
+``WallInspector/WallSweep-v0`` and ``wall_sweep``.
+"""
+
+from __future__ import annotations
+
+import copy
+import re
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from wall_env.tasks import TASKS
+
+__all__ = [
+    "CONFIG_DIR",
+    "task_name",
+    "task_env_id",
+    "task_slug",
+    "default_config",
+    "load_config",
+    "apply_overrides",
+    "validate_config",
+    "save_config",
+]
+
+CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+
+# Defaults shared by every task; a task's YAML file overrides any of them.
+_BASE: dict[str, Any] = {
+    "env_id": None,
+    "env_kwargs": {},  # passed to gym.make, e.g. {k_s: 4.1, d_thr: 0.132, noise: true}
+    "randomize": False,  # draw k_s, d_thr, standoff, mass per episode from randomize_ranges
+    "randomize_ranges": {},
+    "residual": None,  # None, "pid" or "scmpc": learn a correction on top of that controller
+    "residual_scale": [0.2, 0.2, 0.2, 0.2],  # largest correction per normalised action entry
+    "residual_base_kwargs": {},  # keywords for the base controller's from_env, e.g. {k_s: 4.1}
+    "timesteps": 1_000_000,
+    "seed": 0,
+    "n_envs": 16,  # environments in the vector env
+    "n_workers": 2,  # processes that run them (n_envs / n_workers environments each)
+    "torch_threads": 1,  # PyTorch threads in the learner process
+    "ppo": {
+        "n_steps": 256,  # per environment per rollout: n_envs * n_steps transitions per update
+        "batch_size": 1024,
+        "n_epochs": 5,
+        "gamma": 0.99,
+        "gae_lambda": 0.95,
+        "learning_rate": 3.0e-4,
+        "clip_range": 0.2,
+        "ent_coef": 0.0,
+        "vf_coef": 0.5,
+        "max_grad_norm": 0.5,
+        "target_kl": None,
+    },
+    "policy": {
+        "net_arch": [64, 64],  # hidden layers of both the actor and the critic
+        "activation": "tanh",
+        "log_std_init": -1.0,  # initial exploration std exp(-1) = 0.37 of the action range
+        "ortho_init": True,
+    },
+    "normalize": {"norm_obs": True, "norm_reward": True, "clip_obs": 10.0, "clip_reward": 10.0},
+    "eval": {"freq": 100_000, "episodes": 5, "seed": 10_000},  # freq in env steps
+    "checkpoint_freq": 250_000,  # env steps; 0 turns checkpoints off
+    "card_eval": {"episodes": 10, "seed": 0},  # final evaluation written to the model card
+}
+
+_ACTIVATIONS = ("tanh", "relu", "elu")
+_RESIDUAL_BASES = (None, "pid", "scmpc")
+
+
+def task_name(name: str) -> str:
+    """Canonical task name (``"WallSweep"``) from any accepted spelling."""
+    text = str(name).strip()
+    text = text.split("/")[-1]
+    text = re.sub(r"-v\d+$", "", text)
+    if text in TASKS:
+        return text
+    camel = "".join(part.capitalize() for part in text.split("_"))
+    if camel in TASKS:
+        return camel
+    lowered = {t.lower(): t for t in TASKS}
+    if text.lower() in lowered:
+        return lowered[text.lower()]
+    raise ValueError(f"unknown task {name!r}; choose from {', '.join(f'WallInspector/{t}-v0' for t in TASKS)}")
+
+
+def task_env_id(name: str) -> str:
+    return f"WallInspector/{task_name(name)}-v0"
+
+
+def task_slug(name: str) -> str:
+    """File-system name of a task: ``WallSweep`` -> ``wall_sweep``."""
+    return re.sub(r"(?<!^)(?=[A-Z])", "_", task_name(name)).lower()
+
+
+def _merge(base: dict, update: dict) -> dict:
+    out = copy.deepcopy(base)
+    for key, value in update.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict) and key not in ("env_kwargs", "randomize_ranges"):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def default_config(task: str) -> dict[str, Any]:
+    """The task's configuration: shared defaults overridden by ``configs/<slug>.yaml``."""
+    path = CONFIG_DIR / f"{task_slug(task)}.yaml"
+    if not path.is_file():
+        raise FileNotFoundError(f"no training configuration for {task_name(task)}: {path} does not exist")
+    config = load_config(path, validate=False)
+    config["env_id"] = task_env_id(task)
+    return validate_config(config)
+
+
+def load_config(path: str | Path, validate: bool = True) -> dict[str, Any]:
+    """Shared defaults overridden by the YAML file at ``path``."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except FileNotFoundError:
+        raise FileNotFoundError(f"configuration file {path} does not exist") from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f"configuration file {path} is not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"configuration file {path} must hold a mapping, got {type(data).__name__}")
+    unknown = sorted(set(data) - set(_BASE))
+    if unknown:
+        raise ValueError(f"configuration file {path}: unknown key(s) {unknown}; allowed: {sorted(_BASE)}")
+    config = _merge(_BASE, data)
+    return validate_config(config) if validate else config
+
+
+def apply_overrides(config: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+    """Apply ``key.sub=value`` strings (values parsed as YAML) to a copy of ``config``."""
+    config = copy.deepcopy(config)
+    for item in overrides or []:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"override must look like key=value or key.sub=value, got {item!r}")
+        parts = key.strip().split(".")
+        node = config
+        for part in parts[:-1]:
+            if not isinstance(node.get(part), dict):
+                raise ValueError(f"override {item!r}: {part!r} is not a section of the configuration")
+            node = node[part]
+        if parts[-1] not in node and node is config:
+            raise ValueError(f"override {item!r}: unknown key {parts[-1]!r}; allowed: {sorted(config)}")
+        node[parts[-1]] = yaml.safe_load(raw)
+    return validate_config(config)
+
+
+def validate_config(config: dict[str, Any]) -> dict[str, Any]:
+    """Check types and ranges; return ``config`` (normalised in place) or raise ``ValueError``."""
+    if config.get("env_id") is not None:
+        config["env_id"] = task_env_id(config["env_id"])
+
+    def positive_int(name: str, value: Any) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        return value
+
+    for key in ("timesteps", "n_envs", "n_workers", "torch_threads"):
+        positive_int(key, config[key])
+    if config["n_workers"] > config["n_envs"]:
+        raise ValueError(f"n_workers ({config['n_workers']}) must not exceed n_envs ({config['n_envs']})")
+    if not isinstance(config["seed"], int):
+        raise ValueError(f"seed must be an integer, got {config['seed']!r}")
+    ppo = config["ppo"]
+    for key in ("n_steps", "batch_size", "n_epochs"):
+        positive_int(f"ppo.{key}", ppo[key])
+    if ppo["n_steps"] * config["n_envs"] < 2:
+        raise ValueError("ppo.n_steps * n_envs must be at least 2")
+    if not 0.0 < float(ppo["gamma"]) <= 1.0 or not 0.0 <= float(ppo["gae_lambda"]) <= 1.0:
+        raise ValueError(f"ppo.gamma must be in (0, 1] and ppo.gae_lambda in [0, 1], got {ppo['gamma']}, {ppo['gae_lambda']}")
+    if not float(ppo["learning_rate"]) > 0:
+        raise ValueError(f"ppo.learning_rate must be positive, got {ppo['learning_rate']!r}")
+    policy = config["policy"]
+    if not (isinstance(policy["net_arch"], list) and all(isinstance(n, int) and n > 0 for n in policy["net_arch"])):
+        raise ValueError(f"policy.net_arch must be a list of positive layer widths, got {policy['net_arch']!r}")
+    if policy["activation"] not in _ACTIVATIONS:
+        raise ValueError(f"policy.activation must be one of {_ACTIVATIONS}, got {policy['activation']!r}")
+    if config["residual"] not in _RESIDUAL_BASES:
+        raise ValueError(f"residual must be one of {_RESIDUAL_BASES}, got {config['residual']!r}")
+    scale = config["residual_scale"]
+    if isinstance(scale, (int, float)):
+        scale = config["residual_scale"] = [float(scale)] * 4
+    if len(scale) != 4 or not all(0.0 < float(s) <= 2.0 for s in scale):
+        raise ValueError(f"residual_scale must be 4 numbers in (0, 2], got {scale!r}")
+    if not isinstance(config["env_kwargs"], dict):
+        raise ValueError(f"env_kwargs must be a mapping, got {config['env_kwargs']!r}")
+    reserved = sorted({"randomize", "task"} & set(config["env_kwargs"]))
+    if reserved:
+        raise ValueError(f"env_kwargs must not set {reserved}; use randomize/randomize_ranges")
+    ranges = config["randomize_ranges"] or {}
+    for key, bounds in ranges.items():
+        if not (isinstance(bounds, (list, tuple)) and len(bounds) == 2):
+            raise ValueError(f"randomize_ranges[{key!r}] must be a [low, high] pair, got {bounds!r}")
+    if config["randomize"] and not ranges:
+        raise ValueError("randomize is on but randomize_ranges is empty")
+    if int(config["eval"]["episodes"]) < 1 or int(config["card_eval"]["episodes"]) < 1:
+        raise ValueError("eval.episodes and card_eval.episodes must be at least 1")
+    return config
+
+
+def save_config(config: dict[str, Any], path: str | Path) -> None:
+    Path(path).write_text(yaml.safe_dump(config, sort_keys=False))

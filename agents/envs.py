@@ -1,0 +1,67 @@
+"""Building the training and evaluation environments from a configuration.
+
+:func:`env_kwargs` turns a configuration (:mod:`agents.config`) into ``gym.make``
+keywords: the task's ``env_kwargs`` plus, when ``randomize`` is on, the env's own
+``randomize`` keyword with the configured ranges (k_s, d_thr, standoff, mass drawn
+per episode by the environment). :func:`make_env` builds one environment, wrapped
+for a residual agent when the configuration names a base controller, and in a
+``Monitor`` so Stable-Baselines3 logs episode returns and lengths.
+:func:`make_vec_env` puts them in a :class:`~agents.vec_env.MultiEnvSubprocVecEnv`
+(training) or a ``DummyVecEnv`` (evaluation, one process).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
+
+import wall_env  # noqa: F401  (registers the WallInspector tasks)
+from agents.residual import ResidualActionWrapper, make_base_controller
+from agents.vec_env import MultiEnvSubprocVecEnv
+
+__all__ = ["env_kwargs", "make_env", "env_factory", "make_vec_env"]
+
+# info entries that Monitor copies into each finished episode's record (info["episode"])
+MONITOR_INFO_KEYS = ("collisions",)
+
+
+def env_kwargs(config: dict[str, Any], randomize: bool | None = None) -> dict[str, Any]:
+    """``gym.make`` keywords for ``config``; ``randomize`` overrides ``config["randomize"]``."""
+    kwargs = dict(config["env_kwargs"])
+    if config["randomize"] if randomize is None else randomize:
+        kwargs["randomize"] = {k: tuple(float(b) for b in v) for k, v in config["randomize_ranges"].items()}
+    return kwargs
+
+
+def make_env(config: dict[str, Any], randomize: bool | None = None, monitor: bool = True) -> gym.Env:
+    """One environment for ``config`` (residual-wrapped if ``config["residual"]``)."""
+    env = gym.make(config["env_id"], **env_kwargs(config, randomize))
+    if config["residual"]:
+        name, base_kwargs = config["residual"], dict(config["residual_base_kwargs"])
+        env = ResidualActionWrapper(env, lambda e: make_base_controller(name, e, **base_kwargs),
+                                    scale=config["residual_scale"])
+    if monitor:
+        env = Monitor(env, info_keywords=MONITOR_INFO_KEYS)
+    return env
+
+
+def env_factory(config: dict[str, Any], randomize: bool | None = None) -> Callable[[], gym.Env]:
+    """A picklable function that builds :func:`make_env` ``(config, randomize)``."""
+    frozen = dict(config)
+
+    def build() -> gym.Env:
+        return make_env(frozen, randomize)
+
+    return build
+
+
+def make_vec_env(config: dict[str, Any], n_envs: int, n_workers: int = 0, randomize: bool | None = None) -> VecEnv:
+    """``n_envs`` environments in ``n_workers`` processes, or in this process if ``n_workers`` is 0."""
+    fns = [env_factory(config, randomize) for _ in range(n_envs)]
+    if n_workers <= 0:
+        return DummyVecEnv(fns)
+    return MultiEnvSubprocVecEnv(fns, n_workers=n_workers)

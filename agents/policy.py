@@ -1,0 +1,126 @@
+"""Loaded agents: one call from a checkpoint (or a task name) to a policy with ``predict``.
+
+::
+
+    import agents
+    policy = agents.load_policy("WallSweep-v0")          # shipped checkpoint
+    policy = agents.load_policy("out/sweep/best")         # any checkpoint folder
+    action, _ = policy.predict(obs)                       # obs (48,) or (n, 48)
+
+:class:`TrainedPolicy` applies the saved observation normalisation and then the PPO
+network; its ``predict`` follows Stable-Baselines3's ``PolicyPredictor`` protocol
+(``predict(obs, state=None, episode_start=None, deterministic=True) -> (actions,
+state)``). A residual agent needs the environment to build its base controller:
+``load_policy(path, env=env)`` returns a :class:`~agents.residual.ResidualPolicy`.
+
+:func:`policy_factory` gives the ``env -> policy`` function that the comparison
+tables (``controllers.paper_tables``, ``wall-inspector compare``) take for every
+controller, so PPO runs through the same evaluation as PID, MPC and SC-MPC.
+
+Shipped checkpoints live in ``agents/pretrained/<task_slug>/`` (e.g.
+``agents/pretrained/wall_sweep/``), each with its model card.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.checkpoints import CheckpointNotFoundError, load_model, normalize_observation
+from agents.config import task_name, task_slug
+
+__all__ = ["PRETRAINED_DIR", "TrainedPolicy", "load_policy", "policy_factory", "pretrained_path"]
+
+PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
+
+
+class TrainedPolicy:
+    """A PPO model together with the observation statistics it was trained with."""
+
+    def __init__(self, model, normalization: dict[str, Any], info: dict[str, Any], path: Path | None = None):
+        self.model = model
+        self.normalization = normalization
+        self.info = info
+        self.path = path
+        self.env_id: str = info["env_id"]
+        self.observation_space = model.observation_space
+        self.action_space = model.action_space
+
+    def normalize(self, observation: np.ndarray) -> np.ndarray:
+        """The observation as the network sees it (float32, normalised and clipped)."""
+        return normalize_observation(self.normalization, observation)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        """Actions for one observation ``(obs_size,)`` or a batch ``(n, obs_size)``."""
+        obs = np.asarray(observation, dtype=np.float32)
+        expected = self.observation_space.shape[0]
+        if obs.shape[-1:] != (expected,) or obs.ndim > 2:
+            raise ValueError(f"observation must have shape ({expected},) or (n, {expected}), got {obs.shape}")
+        return self.model.predict(self.normalize(obs), state=state, episode_start=episode_start,
+                                  deterministic=deterministic)
+
+    def __repr__(self) -> str:
+        return f"TrainedPolicy({self.env_id}, {self.path})"
+
+
+def pretrained_path(task: str) -> Path:
+    """Folder of the shipped checkpoint for ``task`` (it may not exist)."""
+    return PRETRAINED_DIR / task_slug(task)
+
+
+def _resolve(source: str | Path) -> Path:
+    """Checkpoint folder for an existing path (folder or its ``model.zip``) or a task name."""
+    path = Path(source)
+    if path.exists():
+        return path.parent if path.is_file() and path.suffix == ".zip" else path
+    try:
+        folder = pretrained_path(str(source))
+    except ValueError:  # not a task name either: report the missing path
+        return path.parent if path.suffix == ".zip" else path
+    if not folder.is_dir():
+        raise CheckpointNotFoundError(f"no shipped checkpoint for {task_name(str(source))}: {folder} does not exist "
+                                      "(train one with `wall-inspector train` and pass its folder)")
+    return folder
+
+
+def load_policy(source: str | Path, env=None, verify: bool = True):
+    """Load a trained agent.
+
+    ``source``: a task name (``"WallSweep-v0"``, ``"WallInspector/WallSweep-v0"``) for the
+    shipped checkpoint, a checkpoint folder (a run folder, its ``best/``, a pretrained
+    folder) or the ``model.zip`` inside one. ``env``: needed only for residual agents, to
+    build the base controller. ``verify``: recompute the actions recorded at save time.
+    """
+    folder = _resolve(source)
+    model, normalization, info = load_model(folder, verify=verify)
+    policy = TrainedPolicy(model, normalization, info, folder)
+    residual = info.get("residual")
+    if not residual:
+        return policy
+    if env is None:
+        raise ValueError(f"{folder} holds a residual agent on top of {residual['base']!r}; pass env= so that "
+                         "load_policy can build the base controller for that environment")
+    from agents.residual import ResidualPolicy, make_base_controller
+
+    base = make_base_controller(residual["base"], env, **residual.get("base_kwargs", {}))
+    return ResidualPolicy(base, policy, residual["scale"], name=f"PPO residual on {residual['base']}")
+
+
+def policy_factory(source: str | Path, verify: bool = True) -> Callable[[Any], Any]:
+    """``env -> policy`` for comparison tables; the checkpoint is read once, on the first call."""
+    cache: dict[str, Any] = {}
+
+    def factory(env):
+        if "policy" not in cache:
+            loaded = load_policy(source, env=env, verify=verify)
+            cache["policy"] = loaded
+            cache["residual"] = not isinstance(loaded, TrainedPolicy)
+        if cache["residual"]:  # the base controller belongs to this env: build a fresh one
+            return load_policy(source, env=env, verify=False)
+        return cache["policy"]
+
+    factory.__name__ = f"ppo_policy_factory({source})"
+    return factory

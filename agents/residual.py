@@ -1,0 +1,149 @@
+"""Residual control: PPO learns a bounded correction on top of a base controller.
+
+The base controller (PID or SC-MPC from :mod:`controllers`) already flies the task;
+the agent only has to learn what the base gets wrong near the wall. Applied action::
+
+    a = clip(a_base(obs) + scale * clip(c, -1, 1), -1, 1)
+
+with ``a_base`` the base controller's normalised action, ``c`` the agent's action
+(``Box(-1, 1, (4,))``) and ``scale`` the largest correction per entry (default 0.2 of
+the normalised range: 3.4 N of thrust, 0.6 rad/s of body rate). An untrained agent
+(``c`` near 0) therefore flies like the base controller, which is why residual agents
+learn quickly.
+
+The agent observes the environment's 48 entries followed by the base action (4
+entries), so it can tell what it is correcting. Both the training wrapper
+(:class:`ResidualActionWrapper`, one base controller per environment, built inside
+the worker process) and the deployed policy (:class:`ResidualPolicy`) use
+:func:`combine` and :func:`augment_observation`, so training and deployment apply the
+same arithmetic.
+
+Base controllers follow the Stable-Baselines3 predict protocol:
+``predict(obs, state=None, episode_start=None, deterministic=True) -> (action, state)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+__all__ = [
+    "BASE_CONTROLLERS",
+    "make_base_controller",
+    "combine",
+    "augment_observation",
+    "ResidualActionWrapper",
+    "ResidualPolicy",
+]
+
+BASE_CONTROLLERS = ("pid", "scmpc")
+
+
+def make_base_controller(name: str, env: gym.Env, **kwargs: Any):
+    """Build base controller ``name`` (``"pid"`` or ``"scmpc"``) for ``env`` with the
+    :mod:`controllers` package's ``from_env`` constructors."""
+    if name not in BASE_CONTROLLERS:
+        raise ValueError(f"residual base must be one of {BASE_CONTROLLERS}, got {name!r}")
+    try:
+        import controllers
+    except ImportError as exc:  # pragma: no cover - controllers ships with this repository
+        raise ImportError(f"residual base {name!r} needs the controllers package: {exc}") from exc
+    class_name = {"pid": "PID", "scmpc": "SCMPC"}[name]
+    cls = getattr(controllers, class_name, None)
+    if cls is None:
+        raise ImportError(f"controllers.{class_name} is not available yet; residual base {name!r} cannot be built")
+    return cls.from_env(env.unwrapped, **kwargs)
+
+
+def combine(base_action: np.ndarray, correction: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """``clip(base + scale * clip(correction, -1, 1), -1, 1)``, for one action or a batch."""
+    c = np.clip(np.asarray(correction, dtype=np.float64), -1.0, 1.0)
+    return np.clip(np.asarray(base_action, dtype=np.float64) + np.asarray(scale, dtype=np.float64) * c, -1.0, 1.0)
+
+
+def augment_observation(obs: np.ndarray, base_action: np.ndarray) -> np.ndarray:
+    """The residual agent's observation: the env's observation followed by the base action."""
+    return np.concatenate([np.asarray(obs, dtype=np.float32), np.asarray(base_action, dtype=np.float32)], axis=-1)
+
+
+def _base_predict(base, obs, state, episode_start):
+    action, state = base.predict(obs, state=state, episode_start=episode_start, deterministic=True)
+    return np.asarray(action, dtype=np.float64).reshape(np.shape(obs)[:-1] + (4,)), state
+
+
+class ResidualActionWrapper(gym.Wrapper):
+    """Environment whose action is a correction to ``base``'s action (see module docstring).
+
+    Parameters
+    ----------
+    env: a wall environment (``Box(-1, 1, (4,))`` actions).
+    base: the base controller, or a function ``env -> controller`` called here (so that
+        inside a subprocess the controller is built in that process).
+    scale: largest correction per action entry, a number or 4 numbers.
+
+    ``info`` gains ``base_action``, ``residual_correction`` (the clipped agent action)
+    and ``applied_action``.
+    """
+
+    def __init__(self, env: gym.Env, base: Any | Callable[[gym.Env], Any], scale: float | np.ndarray = 0.2):
+        super().__init__(env)
+        self.base = base(env) if callable(base) and not hasattr(base, "predict") else base
+        self.scale = np.broadcast_to(np.asarray(scale, dtype=np.float64), (4,)).copy()
+        if not np.all(self.scale > 0):
+            raise ValueError(f"scale must be positive, got {self.scale.tolist()}")
+        inner = env.observation_space
+        low = np.concatenate([inner.low, -np.ones(4, dtype=np.float32)])
+        high = np.concatenate([inner.high, np.ones(4, dtype=np.float32)])
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
+        self._base_state = None
+        self._base_action = np.zeros(4)
+
+    def _observe(self, obs: np.ndarray, episode_start: bool) -> np.ndarray:
+        self._base_action, self._base_state = _base_predict(
+            self.base, obs, self._base_state, np.array([episode_start]))
+        return augment_observation(obs, self._base_action)
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self._base_state = None
+        return self._observe(obs, True), info
+
+    def step(self, action):
+        correction = np.clip(np.asarray(action, dtype=np.float64).reshape(4), -1.0, 1.0)
+        base_action = self._base_action
+        applied = combine(base_action, correction, self.scale)
+        obs, reward, terminated, truncated, info = self.env.step(applied)
+        info["base_action"] = base_action.copy()
+        info["residual_correction"] = correction
+        info["applied_action"] = applied
+        return self._observe(obs, False), reward, terminated, truncated, info
+
+
+class ResidualPolicy:
+    """A deployed residual agent: base controller plus the trained correction policy.
+
+    ``predict`` takes the environment's plain observation (one ``(48,)`` or a batch
+    ``(n, 48)``), asks the base controller, feeds the augmented observation to
+    ``correction`` (an object with SB3-style ``predict``) and returns the combined
+    action. The base controller's recurrent state travels in ``state``.
+    """
+
+    def __init__(self, base: Any, correction: Any, scale: float | np.ndarray, name: str = "residual"):
+        self.base = base
+        self.correction = correction
+        self.scale = np.broadcast_to(np.asarray(scale, dtype=np.float64), (4,)).copy()
+        self.name = name
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        obs = np.asarray(observation, dtype=np.float32)
+        base_action, state = _base_predict(self.base, obs, state, episode_start)
+        correction, _ = self.correction.predict(augment_observation(obs, base_action), deterministic=deterministic)
+        return combine(base_action, correction, self.scale).astype(np.float32), state
+
+    def __repr__(self) -> str:
+        return f"ResidualPolicy({self.name}, scale={self.scale.tolist()})"

@@ -1,0 +1,403 @@
+"""``wall-inspector train``: PPO (Stable-Baselines3, PyTorch) on a Wall Inspector task.
+
+::
+
+    wall-inspector train --env WallInspector/WallSweep-v0 --timesteps 3000000 \\
+        --n-envs 16 --seed 0 --out runs/sweep
+    wall-inspector train --resume runs/sweep --timesteps 4000000     # continue to 4M steps
+    wall-inspector train --env WallHover-v0 --residual pid --randomize --out runs/hover_res
+
+What a run does:
+
+* hyperparameters from ``agents/configs/<task>.yaml`` (or ``--config FILE``), changed by
+  the flags and ``--set key=value``; the result is saved as ``OUT/config.yaml``;
+* ``n_envs`` environments in ``n_workers`` processes
+  (:class:`~agents.vec_env.MultiEnvSubprocVecEnv`), under ``VecNormalize`` (observations
+  and rewards), stepped by PPO;
+* an ``EvalCallback`` on a separate environment (same settings, its own seeds) every
+  ``eval.freq`` env steps, saving the best model to ``OUT/best/``; periodic checkpoints
+  in ``OUT/checkpoints/<steps>/``; TensorBoard logs in ``OUT/tb/``; a progress bar;
+* at the end: the final checkpoint in ``OUT/``, an evaluation of the best checkpoint on
+  the task's nominal settings (no randomisation, command noise as configured) over
+  ``card_eval.episodes`` seeds, and the model card ``OUT/model_card.{json,md}`` with the
+  exact command, timesteps, wall-clock time, throughput and those metrics.
+  ``--ship`` then copies the best checkpoint and its card into
+  ``agents/pretrained/<task>/``.
+
+Throughput is total env steps of the run divided by its wall time, PPO updates,
+evaluations and checkpoints included.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.config import (
+    apply_overrides,
+    default_config,
+    load_config,
+    save_config,
+    task_env_id,
+    task_slug,
+)
+
+__all__ = ["add_arguments", "run", "train", "check_observations", "policy_description"]
+
+_FINAL_FILES = ("model.zip", "normalization.json", "policy.json")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--env", help="task, e.g. WallInspector/WallSweep-v0 (or WallSweep-v0, wall_sweep)")
+    parser.add_argument("--timesteps", type=int, help="total env steps (default: the task's config)")
+    parser.add_argument("--n-envs", type=int, help="environments in the vector env (default: config, 16)")
+    parser.add_argument("--workers", type=int, help="worker processes running them (default: config, 2)")
+    parser.add_argument("--seed", type=int, help="random seed (default: config, 0)")
+    parser.add_argument("--out", help="run folder for checkpoints, logs and the model card")
+    parser.add_argument("--config", help="YAML configuration instead of agents/configs/<task>.yaml")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a configuration entry, e.g. --set ppo.n_steps=128 (repeatable)")
+    parser.add_argument("--randomize", action=argparse.BooleanOptionalAction, default=None,
+                        help="domain randomisation of k_s, d_thr, stand-off and mass (ranges from the config)")
+    parser.add_argument("--residual", choices=["none", "pid", "scmpc"],
+                        help="learn a correction on top of this base controller (default: config, none)")
+    parser.add_argument("--eval-freq", type=int, help="env steps between evaluations (default: config)")
+    parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: config)")
+    parser.add_argument("--checkpoint-freq", type=int, help="env steps between checkpoints, 0 = none (default: config)")
+    parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its latest checkpoint")
+    parser.add_argument("--ship", action="store_true",
+                        help="copy the best checkpoint and its model card into agents/pretrained/<task>/")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--quiet", action="store_true", help="no PPO log table on the terminal")
+
+
+# ---------------------------------------------------------------------- configuration from flags
+def _config_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    if args.config:
+        config = load_config(args.config, validate=False)
+        if args.env:
+            config["env_id"] = task_env_id(args.env)
+        if not config.get("env_id"):
+            raise SystemExit("--env is needed when the configuration file names no env_id")
+    else:
+        if not args.env:
+            raise SystemExit("--env is required (e.g. --env WallInspector/WallSweep-v0)")
+        config = default_config(args.env)
+    flags = {
+        "timesteps": args.timesteps, "n_envs": args.n_envs, "n_workers": args.workers, "seed": args.seed,
+        "randomize": args.randomize, "checkpoint_freq": args.checkpoint_freq,
+        "residual": None if args.residual == "none" else args.residual,
+    }
+    for key, value in flags.items():
+        if value is not None or (key == "residual" and args.residual == "none"):
+            config[key] = value
+    if args.eval_freq is not None:
+        config["eval"]["freq"] = args.eval_freq
+    if args.eval_episodes is not None:
+        config["eval"]["episodes"] = args.eval_episodes
+    if args.workers is None and config["n_workers"] > config["n_envs"]:
+        config["n_workers"] = config["n_envs"]
+    return apply_overrides(config, args.set)
+
+
+def _command(args: argparse.Namespace, config: dict[str, Any]) -> str:
+    """The command that repeats this run, every setting that matters spelled out."""
+    if args.resume:
+        parts = ["wall-inspector", "train", "--resume", args.resume, "--timesteps", str(config["timesteps"])]
+    else:
+        parts = ["wall-inspector", "train", "--env", config["env_id"], "--timesteps", str(config["timesteps"]),
+                 "--n-envs", str(config["n_envs"]), "--workers", str(config["n_workers"]), "--seed", str(config["seed"]),
+                 "--out", str(args.out)]
+        if args.config:
+            parts += ["--config", args.config]
+        if config["randomize"]:
+            parts.append("--randomize")
+        if config["residual"]:
+            parts += ["--residual", config["residual"]]
+        if args.eval_freq is not None:
+            parts += ["--eval-freq", str(args.eval_freq)]
+        if args.eval_episodes is not None:
+            parts += ["--eval-episodes", str(args.eval_episodes)]
+        if args.checkpoint_freq is not None:
+            parts += ["--checkpoint-freq", str(args.checkpoint_freq)]
+        for item in args.set:
+            parts += ["--set", item]
+        if args.ship:
+            parts.append("--ship")
+    return shlex.join(parts)
+
+
+# ---------------------------------------------------------------------- pieces of a run
+def policy_description(config: dict[str, Any]) -> dict[str, Any]:
+    """What ``policy.json`` says about every checkpoint of this configuration."""
+    residual = None
+    if config["residual"]:
+        residual = {"base": config["residual"], "scale": [float(s) for s in config["residual_scale"]],
+                    "base_kwargs": dict(config["residual_base_kwargs"])}
+    return {"env_id": config["env_id"], "algorithm": "PPO", "residual": residual}
+
+
+def check_observations(config: dict[str, Any], n: int = 8, seed: int = 12345) -> np.ndarray:
+    """A few raw observations from one short flight (zero actions) for the save/load check."""
+    from agents.envs import make_env
+
+    env = make_env(config, randomize=False, monitor=False)
+    try:
+        obs, _ = env.reset(seed=seed)
+        out = [obs]
+        for _ in range(n * 5):
+            obs, _, terminated, truncated, _ = env.step(np.zeros(4, dtype=np.float32))
+            out.append(obs)
+            if terminated or truncated:
+                obs, _ = env.reset()
+        return np.asarray(out[:: 5][:n], dtype=np.float32)
+    finally:
+        env.close()
+
+
+def _git_commit() -> str | None:
+    try:
+        root = Path(__file__).resolve().parent.parent
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
+        if commit.returncode != 0:
+            return None
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "agents", "wall_env", "controllers"], cwd=root,
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+        return commit.stdout.strip() + (" (with uncommitted changes)" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def _latest_checkpoint(run_dir: Path) -> Path:
+    """The checkpoint folder in ``run_dir`` with the most timesteps (final or periodic)."""
+    from agents.checkpoints import CheckpointNotFoundError, read_json
+
+    candidates = []
+    for folder in [run_dir, *sorted((run_dir / "checkpoints").glob("*"))]:
+        if all((folder / name).is_file() for name in _FINAL_FILES):
+            candidates.append((int(read_json(folder / "policy.json").get("num_timesteps", 0)), str(folder)))
+    if not candidates:
+        raise CheckpointNotFoundError(f"nothing to resume in {run_dir}: no {'/'.join(_FINAL_FILES)} there or in "
+                                      f"{run_dir / 'checkpoints'}/*")
+    return Path(max(candidates)[1])
+
+
+def _make_ppo(config: dict[str, Any], env, tb_dir: Path, verbose: int):
+    import torch
+    from stable_baselines3 import PPO
+
+    activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU}[config["policy"]["activation"]]
+    arch = list(config["policy"]["net_arch"])
+    policy_kwargs = {"net_arch": {"pi": arch, "vf": arch}, "activation_fn": activation,
+                     "log_std_init": float(config["policy"]["log_std_init"]), "ortho_init": bool(config["policy"]["ortho_init"])}
+    ppo = dict(config["ppo"])
+    return PPO("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=config["seed"], tensorboard_log=str(tb_dir),
+               device="cpu", verbose=verbose, **ppo)
+
+
+def _machine() -> str:
+    return f"{os.cpu_count()} CPUs, {platform.machine()}, {platform.system()} {platform.release()}"
+
+
+def _versions() -> dict[str, str]:
+    import gymnasium
+    import stable_baselines3
+    import torch
+
+    return {"python": platform.python_version(), "torch": torch.__version__, "stable_baselines3": stable_baselines3.__version__,
+            "gymnasium": gymnasium.__version__, "numpy": np.__version__}
+
+
+# ---------------------------------------------------------------------- the run
+def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, progress_bar: bool = True,
+          verbose: int = 1, command: str | None = None) -> dict[str, Any]:
+    """Train (or, with ``resume``, continue) a run in ``out_dir``; return the model card."""
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from agents.callbacks import PeriodicCheckpoint, ProgressBar, SaveBestCheckpoint, TrainingClock
+    from agents.checkpoints import load_model, read_json, restore_normalization, save_checkpoint, write_model_card
+    from agents.envs import make_vec_env
+
+    out = Path(out_dir)
+    torch.set_num_threads(int(config["torch_threads"]))
+    description = policy_description(config)
+    norm = config["normalize"]
+    checks = check_observations(config)
+
+    previous_wall = 0.0
+    best_so_far = -np.inf
+    if resume:
+        source = _latest_checkpoint(out)
+        model, state, info = load_model(source)
+        previous_wall = float(info.get("wall_time_s", 0.0))
+        if (out / "best" / "policy.json").is_file():
+            best_so_far = float(read_json(out / "best" / "policy.json").get("eval_mean_return", -np.inf))
+        if model.num_timesteps >= config["timesteps"]:
+            raise SystemExit(f"{source} already has {model.num_timesteps} timesteps; pass a larger --timesteps to go on")
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        save_config(config, out / "config.yaml")
+
+    venv = make_vec_env(config, config["n_envs"], config["n_workers"])
+    eval_env = None
+    try:
+        train_env = VecNormalize(venv, norm_obs=norm["norm_obs"], norm_reward=norm["norm_reward"],
+                                 clip_obs=float(norm["clip_obs"]), clip_reward=float(norm["clip_reward"]),
+                                 gamma=float(config["ppo"]["gamma"]))
+        if resume:
+            restore_normalization(train_env, state)
+            model.set_env(train_env)
+            model.tensorboard_log = str(out / "tb")
+            print(f"resuming from {source} at {model.num_timesteps} timesteps", file=sys.stderr)
+        else:
+            model = _make_ppo(config, train_env, out / "tb", verbose)
+        start_steps = int(model.num_timesteps)
+
+        eval_env = VecNormalize(make_vec_env(config, 1, 0), training=False, norm_obs=norm["norm_obs"], norm_reward=False,
+                                clip_obs=float(norm["clip_obs"]))
+        eval_env.seed(int(config["eval"]["seed"]))
+        clock = TrainingClock(previous_wall)
+        best = SaveBestCheckpoint(out / "best", description, clock, checks)
+        evaluation = EvalCallback(eval_env, callback_on_new_best=best, n_eval_episodes=int(config["eval"]["episodes"]),
+                                  eval_freq=max(int(config["eval"]["freq"]) // config["n_envs"], 1),
+                                  log_path=str(out / "eval"), deterministic=True, verbose=verbose)
+        evaluation.best_mean_reward = best_so_far
+        callbacks = [evaluation]
+        if int(config["checkpoint_freq"]) > 0:
+            callbacks.append(PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks))
+        if progress_bar:
+            callbacks.append(ProgressBar(config["timesteps"], initial=start_steps))
+
+        model.learn(total_timesteps=config["timesteps"] - start_steps, callback=CallbackList(callbacks),
+                    reset_num_timesteps=not resume, tb_log_name="ppo", progress_bar=False)
+        run_time = clock.this_run_s
+        total_time = clock.total_s
+        save_checkpoint(out, model, train_env, {**description, "num_timesteps": int(model.num_timesteps),
+                                                "wall_time_s": round(total_time, 3)}, checks)
+    finally:
+        venv.close()
+        if eval_env is not None:
+            eval_env.close()
+
+    if not (out / "best" / "policy.json").is_file():  # no evaluation ran: the final model is the best we have
+        from agents.checkpoints import copy_checkpoint
+
+        copy_checkpoint(out, out / "best")
+
+    steps_this_run = int(model.num_timesteps) - start_steps
+    card = model_card(config, out / "best", command=command, training={
+        "total_timesteps": int(model.num_timesteps),
+        "timesteps_this_run": steps_this_run,
+        "wall_time_s": round(run_time, 2),
+        "total_wall_time_s": round(total_time, 2),
+        "steps_per_s": round(steps_this_run / max(run_time, 1e-9), 1),
+        "n_envs": config["n_envs"],
+        "n_workers": config["n_workers"],
+        "seed": config["seed"],
+        "resumed": bool(resume),
+        "machine": _machine(),
+        "versions": _versions(),
+        "git_commit": _git_commit(),
+    })
+    write_model_card(out, card)
+    return card
+
+
+def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None, training: dict[str, Any]) -> dict[str, Any]:
+    """Evaluate ``checkpoint`` on the task's nominal settings and assemble the model card."""
+    import gymnasium as gym
+
+    from agents.envs import env_kwargs
+    from agents.evaluate import evaluate_policy_on_env
+    from agents.policy import load_policy
+
+    kwargs = env_kwargs(config, randomize=False)
+    seeds = range(int(config["card_eval"]["seed"]), int(config["card_eval"]["seed"]) + int(config["card_eval"]["episodes"]))
+    env = gym.make(config["env_id"], **kwargs)
+    try:
+        policy = load_policy(checkpoint, env=env)
+        metrics = evaluate_policy_on_env(policy, env, seeds)
+    finally:
+        env.close()
+    info = json.loads((checkpoint / "policy.json").read_text())
+    return {
+        "env_id": config["env_id"],
+        "summary": ("PPO (Stable-Baselines3, MLP " + "x".join(map(str, config["policy"]["net_arch"])) + ") "
+                    + (f"learning a residual correction on top of {config['residual']}" if config["residual"]
+                       else "flying the task directly (collective thrust and body rates)") + "."),
+        "command": command or "(trained through the Python API: agents.train.train)",
+        "checkpoint": f"{checkpoint.name}/ at {info.get('num_timesteps')} timesteps "
+                      f"(best mean evaluation return {info.get('eval_mean_return', float('nan')):.1f})",
+        "residual": config["residual"],
+        "randomize": {k: list(v) for k, v in config["randomize_ranges"].items()} if config["randomize"] else None,
+        "training": training,
+        "evaluation": {
+            "scenario": (f"{len(seeds)} episodes, seeds {seeds.start}..{seeds.stop - 1}, deterministic actions, "
+                         f"gym.make({config['env_id']!r}, **{kwargs!r}) (task defaults: k_s 4.1 N/m, d_thr 0.132 m, "
+                         "command noise on, unless set here)."),
+            "env_kwargs": kwargs,
+            "seeds": list(seeds),
+            "metrics": metrics,
+        },
+        "config": config,
+    }
+
+
+def ship(run_dir: Path, task: str) -> Path:
+    """Copy ``run_dir/best`` and the run's model card into ``agents/pretrained/<task>/``."""
+    from agents.checkpoints import copy_checkpoint
+    from agents.policy import pretrained_path
+
+    target = pretrained_path(task)
+    copy_checkpoint(run_dir / "best", target)
+    for name in ("model_card.json", "model_card.md"):
+        (target / name).write_bytes((run_dir / name).read_bytes())
+    return target
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.resume:
+        run_dir = Path(args.resume)
+        if not (run_dir / "config.yaml").is_file():
+            raise SystemExit(f"cannot resume: {run_dir / 'config.yaml'} does not exist")
+        changing = [flag for flag, value in (("--env", args.env), ("--config", args.config), ("--n-envs", args.n_envs),
+                                             ("--seed", args.seed), ("--randomize", args.randomize),
+                                             ("--residual", args.residual), ("--set", args.set or None),
+                                             ("--out", args.out)) if value is not None]
+        if changing:
+            raise SystemExit(f"--resume continues the saved configuration; drop {', '.join(changing)}")
+        config = load_config(run_dir / "config.yaml")
+        for key, value in (("timesteps", args.timesteps), ("n_workers", args.workers), ("checkpoint_freq", args.checkpoint_freq)):
+            if value is not None:
+                config[key] = value
+        out = run_dir
+    else:
+        if not args.out:
+            raise SystemExit("--out is required (the run folder)")
+        config = _config_from_args(args)
+        out = Path(args.out)
+        if (out / "config.yaml").exists():
+            raise SystemExit(f"{out} already holds a run; continue it with --resume {out} or choose another --out")
+    card = train(config, out, resume=bool(args.resume), progress_bar=not args.no_progress,
+                 verbose=0 if args.quiet else 1, command=_command(args, config))
+    t, m = card["training"], card["evaluation"]["metrics"]
+    print(f"trained {t['timesteps_this_run']} steps in {t['wall_time_s']:.0f} s ({t['steps_per_s']:.0f} env steps/s); "
+          f"best checkpoint: return {m['mean_return']:.1f}, completed {m['completed']:.0%}, "
+          f"position RMSE {100 * m['position_rmse_m']:.2f} cm, wall-normal RMSE {100 * m['wall_normal_rmse_m']:.2f} cm, "
+          f"collisions {m['collisions']}")
+    print(f"model card: {out / 'model_card.md'}")
+    if args.ship:
+        target = ship(out, config["env_id"])
+        print(f"shipped to {target}")
+    return 0
