@@ -37,6 +37,7 @@ import platform
 import shlex
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +52,7 @@ from agents.config import (
     task_slug,
 )
 
-__all__ = ["add_arguments", "run", "train", "check_observations", "policy_description"]
+__all__ = ["add_arguments", "run", "train", "TrainingRun", "check_observations", "policy_description"]
 
 _FINAL_FILES = ("model.zip", "normalization.json", "policy.json")
 
@@ -218,9 +219,20 @@ def _versions() -> dict[str, str]:
 
 
 # ---------------------------------------------------------------------- the run
+@dataclass
+class TrainingRun:
+    """What :func:`train` leaves: the model card, the trained model and its (closed)
+    ``VecNormalize``, whose statistics are the ones saved in ``folder``."""
+
+    card: dict[str, Any]
+    model: Any
+    normalizer: Any
+    folder: Path
+
+
 def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, progress_bar: bool = True,
-          verbose: int = 1, command: str | None = None) -> dict[str, Any]:
-    """Train (or, with ``resume``, continue) a run in ``out_dir``; return the model card."""
+          verbose: int = 1, command: str | None = None) -> TrainingRun:
+    """Train (or, with ``resume``, continue) a run in ``out_dir``."""
     import torch
     from stable_baselines3.common.callbacks import CallbackList, EvalCallback
     from stable_baselines3.common.vec_env import VecNormalize
@@ -311,7 +323,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         "git_commit": _git_commit(),
     })
     write_model_card(out, card)
-    return card
+    return TrainingRun(card, model, train_env, out)
 
 
 def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None, training: dict[str, Any]) -> dict[str, Any]:
@@ -390,7 +402,7 @@ def run(args: argparse.Namespace) -> int:
         if (out / "config.yaml").exists():
             raise SystemExit(f"{out} already holds a run; continue it with --resume {out} or choose another --out")
     card = train(config, out, resume=bool(args.resume), progress_bar=not args.no_progress,
-                 verbose=0 if args.quiet else 1, command=_command(args, config))
+                 verbose=0 if args.quiet else 1, command=_command(args, config)).card
     t, m = card["training"], card["evaluation"]["metrics"]
     print(f"trained {t['timesteps_this_run']} steps in {t['wall_time_s']:.0f} s ({t['steps_per_s']:.0f} env steps/s); "
           f"best checkpoint: return {m['mean_return']:.1f}, completed {m['completed']:.0%}, "

@@ -1,0 +1,106 @@
+"""Loading checkpoints: every missing, corrupted or mismatched file is named in the error."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from agents import CheckpointError, CheckpointNotFoundError, load_policy
+from agents.checkpoints import save_checkpoint
+from agents.config import default_config
+from agents.envs import make_vec_env
+from agents.train import check_observations, policy_description
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    """An untrained PPO model with normalisation statistics from a few hundred steps."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    config = default_config("WallHover")
+    venv = VecNormalize(make_vec_env(config, 1, 0))
+    venv.reset()
+    for _ in range(300):
+        venv.step(np.zeros((1, 4), dtype=np.float32))
+    model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, device="cpu", seed=0)
+    folder = tmp_path_factory.mktemp("ckpt") / "hover"
+    save_checkpoint(folder, model, venv, {**policy_description(config), "num_timesteps": 0}, check_observations(config))
+    venv.close()
+    return folder
+
+
+def _copy(checkpoint, tmp_path):
+    import shutil
+
+    target = tmp_path / "copy"
+    shutil.copytree(checkpoint, target)
+    return target
+
+
+def test_valid_checkpoint_loads(checkpoint):
+    policy = load_policy(checkpoint)
+    obs = np.asarray(json.loads((checkpoint / "policy.json").read_text())["check"]["observations"], dtype=np.float32)
+    actions, _ = policy.predict(obs)
+    assert actions.shape == (len(obs), 4)
+
+
+def test_missing_folder_is_named(tmp_path):
+    missing = tmp_path / "nothing_here"
+    with pytest.raises(CheckpointNotFoundError, match=re.escape(str(missing))):
+        load_policy(missing)
+    with pytest.raises(FileNotFoundError):  # also a FileNotFoundError for callers that catch that
+        load_policy(missing / "model.zip")
+
+
+@pytest.mark.parametrize("name", ["model.zip", "normalization.json", "policy.json"])
+def test_missing_file_is_named(checkpoint, tmp_path, name):
+    folder = _copy(checkpoint, tmp_path)
+    (folder / name).unlink()
+    with pytest.raises(CheckpointNotFoundError, match=re.escape(str(folder / name))):
+        load_policy(folder)
+
+
+def test_corrupted_model_is_named(checkpoint, tmp_path):
+    folder = _copy(checkpoint, tmp_path)
+    data = (folder / "model.zip").read_bytes()
+    (folder / "model.zip").write_bytes(data[: len(data) // 2])  # a truncated download
+    with pytest.raises(CheckpointError, match=re.escape(str(folder / "model.zip")) + ".*corrupted"):
+        load_policy(folder)
+    (folder / "model.zip").write_bytes(b"not a zip at all")
+    with pytest.raises(CheckpointError, match=re.escape(str(folder / "model.zip"))):
+        load_policy(folder / "model.zip")
+
+
+@pytest.mark.parametrize("name", ["normalization.json", "policy.json"])
+def test_corrupted_json_is_named(checkpoint, tmp_path, name):
+    folder = _copy(checkpoint, tmp_path)
+    text = (folder / name).read_text()
+    (folder / name).write_text(text[: len(text) // 3])
+    with pytest.raises(CheckpointError, match=re.escape(str(folder / name)) + ".*corrupted"):
+        load_policy(folder)
+
+
+def test_statistics_that_do_not_belong_to_the_model_are_refused(checkpoint, tmp_path):
+    folder = _copy(checkpoint, tmp_path)
+    state = json.loads((folder / "normalization.json").read_text())
+    state["obs_mean"] = [m + 0.5 for m in state["obs_mean"]]
+    (folder / "normalization.json").write_text(json.dumps(state))
+    with pytest.raises(CheckpointError, match=re.escape(str(folder / "normalization.json")) + ".*do not belong together"):
+        load_policy(folder)
+    state["obs_mean"] = state["obs_mean"][:10]
+    state["obs_var"] = state["obs_var"][:10]
+    (folder / "normalization.json").write_text(json.dumps(state))
+    with pytest.raises(CheckpointError, match="statistics for 10 observation entries"):
+        load_policy(folder)
+
+
+def test_task_without_shipped_checkpoint_names_the_expected_folder(monkeypatch, tmp_path):
+    import agents.policy
+
+    monkeypatch.setattr(agents.policy, "PRETRAINED_DIR", tmp_path / "pretrained")
+    with pytest.raises(CheckpointNotFoundError, match=re.escape(str(tmp_path / "pretrained" / "wall_sweep"))):
+        load_policy("WallInspector/WallSweep-v0")
