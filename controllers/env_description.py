@@ -1,0 +1,80 @@
+"""What a controller may know about an environment: its documented public description.
+
+Controllers are built from an environment the way a Stable-Baselines3 agent is,
+but they read only the attributes that :class:`wall_env.WallInspectorEnv`
+documents for controllers: ``vehicle``, ``scene``, ``reference``,
+``action_mapping``, ``nominal_model`` and ``control_dt``. The simulator's own
+effect settings (its hidden suction parameters, noise, randomisation) are never
+read; a controller that wants to know the suction gets it from its caller or a
+model file.
+
+:func:`describe_env` accepts a bare env, a wrapped env (``gym.make`` adds
+wrappers), a Gymnasium vector env or a Stable-Baselines3 ``VecEnv``; for vector
+envs the description of the first sub-env is used (all sub-envs of one vector env
+run the same task).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from wall_env.actions import ActionMapping
+from wall_env.aero import AeroModel
+from wall_env.references import Reference
+from wall_env.scene import Scene
+from wall_env.vehicle import VehicleParams
+
+__all__ = ["EnvDescription", "describe_env", "PUBLIC_ATTRIBUTES"]
+
+PUBLIC_ATTRIBUTES = ("vehicle", "scene", "reference", "action_mapping", "nominal_model", "control_dt")
+
+
+@dataclass(frozen=True)
+class EnvDescription:
+    """The public description of a Wall Inspector environment (all SI)."""
+
+    vehicle: VehicleParams
+    scene: Scene
+    reference: Reference
+    action_mapping: ActionMapping
+    nominal_model: AeroModel
+    control_dt: float  # s
+
+
+def _read_attribute(env: Any, name: str) -> Any:
+    # SB3 VecEnv and Gymnasium vector envs: one value per sub-env
+    if hasattr(env, "num_envs") and hasattr(env, "get_attr"):
+        values = env.get_attr(name)
+        return values[0]
+    if hasattr(env, "get_wrapper_attr"):
+        try:
+            return env.get_wrapper_attr(name)
+        except AttributeError:
+            pass
+    unwrapped = getattr(env, "unwrapped", env)
+    if hasattr(unwrapped, name):
+        return getattr(unwrapped, name)
+    raise AttributeError(name)
+
+
+def describe_env(env: Any) -> EnvDescription:
+    """Read the public description from ``env`` (plain, wrapped or vectorised).
+
+    Raises ``ValueError`` naming the missing attributes if ``env`` is not a Wall
+    Inspector environment.
+    """
+    values: dict[str, Any] = {}
+    missing = []
+    for name in PUBLIC_ATTRIBUTES:
+        try:
+            values[name] = _read_attribute(env, name)
+        except AttributeError:
+            missing.append(name)
+    if missing:
+        raise ValueError(
+            f"env must be a Wall Inspector environment (or a wrapper / vector env of one) exposing "
+            f"{list(PUBLIC_ATTRIBUTES)}; {type(env).__name__} lacks {missing}"
+        )
+    values["control_dt"] = float(values["control_dt"])
+    return EnvDescription(**values)

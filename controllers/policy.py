@@ -1,0 +1,152 @@
+"""The Stable-Baselines3 ``PolicyPredictor`` interface shared by every controller, and its safety net.
+
+``predict(observation, state=None, episode_start=None, deterministic=True)``
+takes one observation ``(48,)`` or a batch ``(n, 48)`` from a vector env and
+returns ``(actions, state)`` with normalised actions ``(4,)`` or ``(n, 4)``
+(float32, as the action space). ``state`` is passed through untouched: the
+controllers keep their memory (warm starts, filters) themselves, one slot per
+batch index, and clear a slot when ``episode_start`` marks that env as new, or,
+when ``episode_start`` is not given, when the observation's time goes backwards
+(a reset). ``stable_baselines3.common.evaluation.evaluate_policy`` therefore takes
+them unchanged.
+
+Subclasses implement :meth:`ControllerPolicy._command`, which returns the
+physical command ``[T (N), wx, wy, wz (rad/s)]`` for one parsed observation; the
+base class maps it through the env's :class:`~wall_env.actions.ActionMapping`.
+
+Safety: a non-finite observation, a solver failure (:class:`SolverFailure`,
+``FloatingPointError``, ``numpy.linalg.LinAlgError``) or a non-finite command
+yields the hover command of :func:`hover_command` (hover thrust, body rates that
+level the vehicle), increments :attr:`ControllerPolicy.failures`, records the
+reason in :attr:`ControllerPolicy.failure_log` and issues a ``RuntimeWarning``.
+The failing env's memory is cleared so the next step starts afresh. A policy
+never returns a NaN action.
+"""
+
+from __future__ import annotations
+
+import warnings
+from abc import ABC, abstractmethod
+from typing import Any
+
+import numpy as np
+
+from controllers.env_description import EnvDescription, describe_env
+from controllers.flatness import attitude_error, level_attitude
+from wall_env.observation import OBSERVATION_SIZE, parse_observation
+from wall_env.vehicle import GRAVITY
+
+__all__ = ["ControllerPolicy", "SolverFailure", "hover_command", "LEVELLING_GAIN"]
+
+LEVELLING_GAIN = np.array([6.0, 6.0, 4.0])  # 1/s, attitude gain of the hover fallback (the PID's)
+
+
+class SolverFailure(RuntimeError):
+    """An optimisation-based controller could not produce a usable command."""
+
+
+def hover_command(mass: float, R_body_to_world: np.ndarray | None, body_rate_max: float) -> np.ndarray:
+    """``[m g, rates]``: hover thrust and body rates that turn the vehicle level (keeping its heading).
+
+    If the attitude is unknown (non-finite), the rates are zero.
+    """
+    command = np.zeros(4)
+    command[0] = mass * GRAVITY
+    if R_body_to_world is not None and np.all(np.isfinite(R_body_to_world)):
+        try:
+            R = np.asarray(R_body_to_world, dtype=float).reshape(1, 3, 3)
+            rates = LEVELLING_GAIN * attitude_error(R, level_attitude(R))[0]
+            command[1:] = np.clip(rates, -body_rate_max, body_rate_max)
+        except ValueError:  # a degenerate matrix (e.g. all zeros) has no attitude
+            pass
+    return command
+
+
+class ControllerPolicy(ABC):
+    """Base class: batching, per-env memory, action mapping and the hover fallback."""
+
+    name = "controller"
+
+    def __init__(self, description: EnvDescription):
+        self.description = description
+        self.vehicle = description.vehicle
+        self.action_mapping = description.action_mapping
+        self.control_dt = description.control_dt
+        self.failures = 0
+        self.failure_log: list[str] = []
+        self._memory: list[Any] = []
+        self._last_time: list[float] = []
+
+    @classmethod
+    def _description(cls, env: Any) -> EnvDescription:
+        return env if isinstance(env, EnvDescription) else describe_env(env)
+
+    # ------------------------------------------------------------------ SB3 interface
+    def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+        """Actions for one observation ``(48,)`` or a batch ``(n, 48)``; see the module docstring."""
+        obs = np.asarray(observation, dtype=float)
+        if obs.shape[-1:] != (OBSERVATION_SIZE,) or obs.ndim not in (1, 2):
+            raise ValueError(f"observation must have shape ({OBSERVATION_SIZE},) or (n, {OBSERVATION_SIZE}), "
+                             f"got {obs.shape}")
+        single = obs.ndim == 1
+        batch = obs.reshape(-1, OBSERVATION_SIZE)
+        n = batch.shape[0]
+        starts = np.zeros(n, dtype=bool) if episode_start is None else np.broadcast_to(
+            np.asarray(episode_start, dtype=bool).reshape(-1), (n,))
+        self._resize_memory(n)
+        self._before_batch(n)
+        actions = np.empty((n, 4), dtype=np.float32)
+        for i in range(n):
+            t = batch[i, -1]
+            if starts[i] or self._memory[i] is None or (np.isfinite(t) and t < self._last_time[i]):
+                self._memory[i] = self._new_memory()
+            if np.isfinite(t):
+                self._last_time[i] = t
+            command = self._safe_command(batch[i], i)
+            actions[i] = self.action_mapping.to_normalised(command)
+        return (actions[0] if single else actions), state
+
+    def reset(self) -> None:
+        """Forget every env's memory (the next call starts new episodes)."""
+        self._memory = []
+        self._last_time = []
+
+    # ------------------------------------------------------------------ for subclasses
+    @abstractmethod
+    def _command(self, fields: dict[str, np.ndarray], memory: Any, index: int) -> np.ndarray:
+        """Physical command ``[T, wx, wy, wz]`` for one parsed observation."""
+
+    def _new_memory(self) -> Any:
+        """Fresh per-env memory at an episode start."""
+        return {}
+
+    def _before_batch(self, n: int) -> None:
+        """Hook called once per :meth:`predict` with the batch size."""
+
+    # ------------------------------------------------------------------ internals
+    def _resize_memory(self, n: int) -> None:
+        if len(self._memory) != n:
+            self._memory = [None] * n
+            self._last_time = [-np.inf] * n
+
+    def _safe_command(self, observation: np.ndarray, index: int) -> np.ndarray:
+        fields = parse_observation(observation)
+        R = fields["R_body_to_world"]
+        if not np.all(np.isfinite(observation)):
+            return self._fail(index, R, "non-finite observation")
+        try:
+            command = np.asarray(self._command(fields, self._memory[index], index), dtype=float)
+        except (SolverFailure, FloatingPointError, np.linalg.LinAlgError) as exc:
+            return self._fail(index, R, f"{type(exc).__name__}: {exc}")
+        if command.shape != (4,) or not np.all(np.isfinite(command)):
+            return self._fail(index, R, f"non-finite command {command.tolist()}")
+        return command
+
+    def _fail(self, index: int, R: np.ndarray, reason: str) -> np.ndarray:
+        self.failures += 1
+        self.failure_log.append(reason)
+        self._memory[index] = self._new_memory()
+        warnings.warn(f"{self.name}: {reason}; commanding hover (failure {self.failures})", RuntimeWarning,
+                      stacklevel=4)
+        return hover_command(self.vehicle.mass, R, self.vehicle.body_rate_max)
