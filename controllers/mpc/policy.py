@@ -1,0 +1,215 @@
+"""Nominal MPC and SC-MPC as Stable-Baselines3-style policies: one class, two models.
+
+Each control step, for each env of the batch:
+
+1. the reference states of the horizon (:mod:`controllers.mpc.reference`) from the
+   observation's time and reference position;
+2. the initial guess: the previous solution shifted by one step (its last block
+   repeated), or, at an episode start, the reference states with the flatness
+   thrust and zero body rates (a *cold* start, given more iterations);
+3. Levenberg-Marquardt on the paper's least-squares problem
+   (:mod:`controllers.mpc.cost`, :mod:`controllers.mpc.lm`) from the measured state
+   ``x_0 = (p_world, R_body_to_world, v_world)``;
+4. the first input ``u_0 = [T, wx, wy, wz]`` is the command, mapped through the
+   env's action mapping.
+
+:class:`MPC` predicts with the env's ``nominal_model`` (the vehicle's linear
+drag); :class:`SCMPC` is the same class with the nominal model plus the paper's
+``wall_suction`` effect (explicit ``k_s``, ``d_thr``) or every effect of a model
+file (:class:`wall_env.model_file.FlightModel`). Neither reads the simulator's own
+effect settings.
+
+Timing: :attr:`MPC.solve_times` lists the seconds each optimisation took (LM
+only), :attr:`MPC.step_times` the seconds of the whole controller step (reference,
+warm start and LM), :attr:`MPC.iteration_counts` the LM iterations;
+:meth:`MPC.clear_statistics` empties them. :attr:`MPC.last_solves` keeps, per batch
+index, the data of the latest solve (:class:`SolveRecord`), so a benchmark can hand
+the very same problem to another solver.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controllers.env_description import EnvDescription
+from controllers.mpc.cost import InputLimits, MPCProblem, MPCWeights
+from controllers.mpc.lm import LevenbergMarquardt, LMResult, LMSettings
+from controllers.mpc.manifold import POINT_SIZE, PointIndex
+from controllers.mpc.reference import HorizonReference, ReferenceStates
+from controllers.policy import ControllerPolicy, SolverFailure
+from wall_env.aero import AeroModel
+from wall_env.effects import make_effect
+from wall_env.model_file import FlightModel
+from wall_env.validation import check_range
+from wall_env.vehicle import VehicleParams
+
+__all__ = ["MPC", "SCMPC", "SolveRecord", "PAPER_SUCTION"]
+
+PAPER_SUCTION = {"k_s": 4.1, "d_thr": 0.132}  # the paper's flight-identified values (Sec. 4.4)
+
+
+@dataclass
+class SolveRecord:
+    """One MPC solve: initial guess ``Z0`` (19, N), fixed start block, stage and global parameters, result."""
+
+    Z0: np.ndarray
+    start: np.ndarray
+    stage_params: np.ndarray
+    global_params: np.ndarray
+    cold: bool
+    result: LMResult
+
+
+def pack_point(u: np.ndarray, p_world: np.ndarray, R_body_to_world: np.ndarray, v_world: np.ndarray) -> np.ndarray:
+    """A 19-vector block (see :mod:`controllers.mpc.manifold`)."""
+    point = np.empty(POINT_SIZE)
+    point[PointIndex.u] = u
+    point[PointIndex.p_world] = p_world
+    point[PointIndex.R_body_to_world] = np.asarray(R_body_to_world).reshape(3, 3).ravel(order="F")
+    point[PointIndex.v_world] = v_world
+    return point
+
+
+class MPC(ControllerPolicy):
+    """The paper's on-manifold MPC (Sec. 3.3) with the model ``model``.
+
+    Parameters
+    ----------
+    description: the env's public description (:func:`controllers.env_description.describe_env`).
+    model: the prediction model; default the env's ``nominal_model``.
+    vehicle: the vehicle of the prediction model (mass, rotor layout); default the env's.
+    horizon, dt: N steps of dt seconds (paper: 20, 0.01 s).
+    weights, limits: :class:`MPCWeights`, :class:`InputLimits` (defaults: the authors' release).
+    solver: :class:`LMSettings` (iteration limits, tolerances).
+    rate_to_applied_command: add the control-rate residual between the last applied
+        command and ``u_0`` (not in the paper; off by default).
+    max_tilt_deg: tilt limit of the flatness attitude reference.
+    model_attitude: attitude reference from flatness with the model's force (default;
+        see :mod:`controllers.mpc.reference`), or from kinematics alone.
+    """
+
+    name = "MPC"
+
+    def __init__(self, description: EnvDescription, model: AeroModel | None = None, *,
+                 vehicle: VehicleParams | None = None, horizon: int = 20, dt: float = 0.01,
+                 weights: MPCWeights | None = None, limits: InputLimits | None = None,
+                 solver: LMSettings | None = None, rate_to_applied_command: bool = False,
+                 max_tilt_deg: float = 80.0, model_attitude: bool = True, force_at_prediction: bool = True):
+        super().__init__(description)
+        if model is not None and not isinstance(model, AeroModel):
+            raise ValueError(f"model must be a wall_env.AeroModel, got {type(model).__name__}")
+        if vehicle is not None and not isinstance(vehicle, VehicleParams):
+            raise ValueError(f"vehicle must be a wall_env.VehicleParams, got {type(vehicle).__name__}")
+        self.model = model if model is not None else description.nominal_model
+        self.model_vehicle = vehicle if vehicle is not None else description.vehicle
+        self.problem = MPCProblem(self.model_vehicle, self.model, description.scene, horizon, dt, weights, limits,
+                                  rate_to_applied_command)
+        self.solver = LevenbergMarquardt(self.problem, solver)
+        max_tilt = math.radians(check_range("max_tilt_deg", max_tilt_deg, 1.0, 89.0))
+        self.horizon_reference = HorizonReference(description.reference, self.problem, max_tilt, model_attitude)
+        self.force_at_prediction = bool(force_at_prediction)
+        self.global_params = self.problem.global_params()
+        self.shift = max(1, int(round(self.control_dt / self.problem.dt)))
+        self.solve_times: list[float] = []
+        self.step_times: list[float] = []
+        self.iteration_counts: list[int] = []
+        self.last_solves: list[SolveRecord | None] = []
+
+    @classmethod
+    def from_env(cls, env: Any, **kwargs: Any) -> MPC:
+        """Nominal MPC for ``env`` (plain, wrapped or vector env), predicting with its ``nominal_model``."""
+        return cls(cls._description(env), **kwargs)
+
+    # ------------------------------------------------------------------ statistics
+    def clear_statistics(self) -> None:
+        self.solve_times.clear()
+        self.step_times.clear()
+        self.iteration_counts.clear()
+
+    # ------------------------------------------------------------------ control
+    def _before_batch(self, n: int) -> None:
+        if len(self.last_solves) != n:
+            self.last_solves = [None] * n
+
+    def _new_memory(self) -> dict[str, Any]:
+        return {"Z": None}
+
+    def initial_guess(self, refs: ReferenceStates) -> np.ndarray:
+        """Cold start: the reference states, flatness thrust and zero body rates."""
+        N = self.problem.horizon
+        Z = np.empty((POINT_SIZE, N))
+        Z[PointIndex.u] = 0.0
+        Z[0] = refs.thrust
+        Z[PointIndex.p_world] = refs.p_world.T
+        Z[PointIndex.R_body_to_world] = refs.R_body_to_world.transpose(0, 2, 1).reshape(N, 9).T
+        Z[PointIndex.v_world] = refs.v_world.T
+        return Z
+
+    def shifted_guess(self, Z: np.ndarray) -> np.ndarray:
+        """Warm start: the previous solution advanced by one control step, its last block repeated."""
+        k = min(self.shift, Z.shape[1] - 1)
+        return np.concatenate([Z[:, k:], np.repeat(Z[:, -1:], k, axis=1)], axis=1)
+
+    def _command(self, fields: dict[str, np.ndarray], memory: dict[str, Any], index: int) -> np.ndarray:
+        t_start = time.perf_counter()
+        p, v = fields["p_world"], fields["v_world"]
+        R = fields["R_body_to_world"]
+        cold = memory["Z"] is None
+        Z_warm = None if cold else self.shifted_guess(memory["Z"])
+        if Z_warm is not None and self.force_at_prediction:
+            p_pred, v_pred = Z_warm[PointIndex.p_world].T, Z_warm[PointIndex.v_world].T
+        else:
+            p_pred = v_pred = None
+        refs = self.horizon_reference.build(float(fields["time"]), p - fields["p_error"], self.global_params,
+                                            p_pred, v_pred)
+        S = self.problem.stage_params(refs.p_world, refs.v_world, refs.R_body_to_world)
+        Z0 = self.initial_guess(refs) if cold else Z_warm
+        u_applied = memory.get("u_applied", Z0[PointIndex.u, 0])
+        start = pack_point(u_applied, p, R, v)
+        t_solve = time.perf_counter()
+        result = self.solver.solve(Z0, start, S, self.global_params, cold=cold)
+        t_end = time.perf_counter()
+        if not (np.all(np.isfinite(result.Z)) and math.isfinite(result.cost)):
+            raise SolverFailure(f"non-finite MPC solution (cost {result.cost})")
+        memory["Z"] = result.Z
+        command = result.Z[PointIndex.u, 0].copy()
+        memory["u_applied"] = command
+        self.last_solves[index] = SolveRecord(Z0, start, S, self.global_params, cold, result)
+        self.solve_times.append(t_end - t_solve)
+        self.step_times.append(t_end - t_start)
+        self.iteration_counts.append(result.iterations)
+        return command
+
+
+class SCMPC(MPC):
+    """Suction-compensated MPC: :class:`MPC` whose model adds the wall suction (paper Eq. 9-10)."""
+
+    name = "SC-MPC"
+
+    @classmethod
+    def from_env(cls, env: Any, *, k_s: float | None = None, d_thr: float | None = None,
+                 model: str | Path | FlightModel | None = None, **kwargs: Any) -> SCMPC:
+        """SC-MPC for ``env``.
+
+        The suction comes from ``k_s`` (N/m) and ``d_thr`` (m) -- missing ones take the
+        paper's identified values 4.1 N/m and 0.132 m -- or from a model file
+        ``model`` (path or :class:`FlightModel`), whose vehicle and every effect
+        (``aero_model()``: nominal drag, wall suction, anything else it holds) become
+        the prediction model. Giving both raises ``ValueError``.
+        """
+        description = cls._description(env)
+        if model is not None:
+            if k_s is not None or d_thr is not None:
+                raise ValueError("give the suction either as k_s/d_thr or as a model file, not both")
+            flight_model = model if isinstance(model, FlightModel) else FlightModel.load(model)
+            return cls(description, flight_model.aero_model(), vehicle=flight_model.vehicle, **kwargs)
+        suction = make_effect("wall_suction",
+                              k_s=PAPER_SUCTION["k_s"] if k_s is None else k_s,
+                              d_thr=PAPER_SUCTION["d_thr"] if d_thr is None else d_thr)
+        return cls(description, description.nominal_model.with_effect(suction), **kwargs)
