@@ -1,0 +1,161 @@
+"""``wall-inspector bench-mpc``: SC-MPC solve time in closed loop, against IPOPT on the very same problems.
+
+SC-MPC flies ``WallInspector/WallSweep-v0`` (k_s = 4.1 N/m, d_thr = 0.132 m, command
+noise on, collisions do not end the episode) for ``--steps`` control steps, episode
+after episode with seeds ``--seed``, ``--seed + 1``, ... After every step the
+problem that step solved -- initial guess, measured state, reference, parameters --
+is handed to the CasADi + IPOPT reference solver
+(:mod:`controllers.mpc.ipopt_reference`), started from the same initial guess.
+
+Reported, in milliseconds: median, p99, p99.8 and max of
+
+- ``lm_solve``: the Levenberg-Marquardt optimisation (what :attr:`MPC.solve_times` holds),
+- ``controller_step``: the whole SC-MPC step (reference states, warm start and LM),
+- ``ipopt_solve``: IPOPT's solver call on the same problem;
+
+the ratio of IPOPT's to LM's median, and the relative cost gap
+``(F_LM - F_IPOPT) / F_IPOPT`` (its share of steps within 1 %, median and max).
+Targets (issue 3): LM median <= 1.0 ms, p99.8 <= 3 ms, >= 10x faster than IPOPT,
+gap within 1 % on >= 95 % of the steps. The process is pinned to one CPU core
+(``--no-pin`` to leave it free); ``--json FILE`` writes every figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import wall_env  # noqa: F401
+from controllers.evaluation import solve_time_stats
+from controllers.mpc.ipopt_reference import IpoptReference
+from controllers.mpc.policy import SCMPC
+
+TARGETS = {"median_ms": 1.0, "p99_8_ms": 3.0, "speedup": 10.0, "gap_share": 0.95, "gap": 0.01}
+ENV_ID = "WallInspector/WallSweep-v0"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--steps", type=int, default=2000, help="control steps to fly (at least 2000 for the targets)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    parser.add_argument("--k-s", type=float, default=4.1, help="suction scale of the env and SC-MPC (N/m)")
+    parser.add_argument("--d-thr", type=float, default=0.132, help="suction threshold of the env and SC-MPC (m)")
+    parser.add_argument("--no-ipopt", action="store_true", help="skip the IPOPT comparison")
+    parser.add_argument("--no-pin", action="store_true", help="do not pin the process to one CPU core")
+    parser.add_argument("--json", metavar="FILE", help="write the figures to FILE")
+
+
+def _pin_to_one_core() -> int | None:
+    if not hasattr(os, "sched_setaffinity"):
+        return None
+    core = sorted(os.sched_getaffinity(0))[-1]
+    os.sched_setaffinity(0, {core})
+    return core
+
+
+def measure(steps: int, seed: int, k_s: float, d_thr: float, with_ipopt: bool = True) -> dict:
+    """Fly SC-MPC for ``steps`` control steps and time it (and IPOPT) on every step."""
+    if steps < 1:
+        raise ValueError(f"steps must be at least 1, got {steps}")
+    env = gym.make(ENV_ID, k_s=k_s, d_thr=d_thr, noise=True, terminate_on_collision=False)
+    policy = SCMPC.from_env(env, k_s=k_s, d_thr=d_thr)
+    ipopt = IpoptReference(policy.problem) if with_ipopt else None
+    lm_cost, ipopt_cost, ipopt_times, ipopt_failures = [], [], [], 0
+    collisions, episodes = 0, 1
+    observation, _ = env.reset(seed=seed)
+    start = True
+    for _ in range(steps):
+        action, _ = policy.predict(observation, episode_start=np.array([start]))
+        start = False
+        record = policy.last_solves[0]
+        if ipopt is not None:
+            result = ipopt.solve(record.Z0, record.start, record.stage_params, record.global_params)
+            ipopt_times.append(result.seconds)
+            ipopt_cost.append(result.cost)
+            lm_cost.append(record.result.cost)
+            ipopt_failures += not result.success
+        observation, _, terminated, truncated, info = env.step(action)
+        collisions += int(info["collision"])
+        if terminated or truncated:
+            observation, _ = env.reset(seed=seed + episodes)
+            episodes += 1
+            start = True
+    env.close()
+    out = {
+        "env": ENV_ID,
+        "k_s": k_s,
+        "d_thr": d_thr,
+        "steps": steps,
+        "episodes": episodes,
+        "collisions": collisions,
+        "policy_failures": policy.failures,
+        "lm_iterations_mean": float(np.mean(policy.iteration_counts)),
+        "lm_solve_ms": solve_time_stats(policy.solve_times),
+        "controller_step_ms": solve_time_stats(policy.step_times),
+    }
+    if ipopt is not None:
+        lm_c, ip_c = np.asarray(lm_cost), np.asarray(ipopt_cost)
+        gap = (lm_c - ip_c) / np.maximum(np.abs(ip_c), 1e-12)
+        out["ipopt_solve_ms"] = solve_time_stats(ipopt_times)
+        out["ipopt_failures"] = ipopt_failures
+        out["speedup_median"] = out["ipopt_solve_ms"]["median"] / out["lm_solve_ms"]["median"]
+        out["cost_gap"] = {
+            "share_within_1pct": float(np.mean(gap <= TARGETS["gap"])),
+            "median": float(np.median(gap)),
+            "max": float(np.max(gap)),
+            "min": float(np.min(gap)),
+        }
+    return out
+
+
+def check_targets(figures: dict) -> dict[str, bool]:
+    checks = {
+        "lm median <= 1.0 ms": figures["lm_solve_ms"]["median"] <= TARGETS["median_ms"],
+        "lm p99.8 <= 3 ms": figures["lm_solve_ms"]["p99_8"] <= TARGETS["p99_8_ms"],
+        "steps >= 2000": figures["steps"] >= 2000,
+    }
+    if "speedup_median" in figures:
+        checks["IPOPT / LM median >= 10"] = figures["speedup_median"] >= TARGETS["speedup"]
+        checks["cost within 1 % on >= 95 % of steps"] = figures["cost_gap"]["share_within_1pct"] >= TARGETS["gap_share"]
+    return checks
+
+
+def _row(name: str, stats: dict) -> str:
+    return (f"  {name:<16} median {stats['median']:7.3f}  p99 {stats['p99']:7.3f}  p99.8 {stats['p99_8']:7.3f}  "
+            f"max {stats['max']:7.3f}  ms  ({stats['count']} solves)")
+
+
+def run(args: argparse.Namespace) -> int:
+    core = None if args.no_pin else _pin_to_one_core()
+    t0 = time.perf_counter()
+    figures = measure(args.steps, args.seed, args.k_s, args.d_thr, with_ipopt=not args.no_ipopt)
+    figures["wall_seconds"] = time.perf_counter() - t0
+    figures["machine"] = {"python": platform.python_version(), "processor": platform.processor() or platform.machine(),
+                          "pinned_core": core}
+    print(f"SC-MPC on {ENV_ID} (k_s {args.k_s} N/m, d_thr {args.d_thr} m, noise on): {figures['steps']} control "
+          f"steps, {figures['episodes']} episode(s), {figures['collisions']} collision step(s), "
+          f"{figures['lm_iterations_mean']:.2f} LM iterations per solve"
+          + (f", pinned to core {core}" if core is not None else ""))
+    print(_row("LM solve", figures["lm_solve_ms"]))
+    print(_row("controller step", figures["controller_step_ms"]))
+    if "ipopt_solve_ms" in figures:
+        print(_row("IPOPT solve", figures["ipopt_solve_ms"]))
+        gap = figures["cost_gap"]
+        print(f"  IPOPT / LM median time: {figures['speedup_median']:.1f}x;  cost gap (F_LM - F_IPOPT) / F_IPOPT: "
+              f"median {gap['median']:.2e}, max {gap['max']:.2e}, min {gap['min']:.2e}, "
+              f"within 1 % on {100 * gap['share_within_1pct']:.1f} % of steps"
+              + (f"; IPOPT did not converge on {figures['ipopt_failures']} step(s)" if figures["ipopt_failures"] else ""))
+    checks = check_targets(figures)
+    figures["targets"] = checks
+    for name, ok in checks.items():
+        print(f"  [{'PASS' if ok else 'FAIL'}] {name}")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(figures, fh, indent=2)
+        print(f"wrote {args.json}")
+    return 0 if all(checks.values()) else 1

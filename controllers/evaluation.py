@@ -1,0 +1,252 @@
+"""Evaluate any policy on any Wall Inspector task over given seeds: tracking, wall-normal error, collisions, effort.
+
+:func:`evaluate` runs one episode per seed (``env.reset(seed=seed)``, so every
+policy meets the same start perturbations and the same command-noise sequence as
+long as its actions lead to the same number of noise draws, which they do: one
+per step) and records, per step, from the env's ``info``: the true position
+``p_world``, the reference ``p_ref``, ``collision``, ``wall_clearance``; and from the
+policy the action it returned.
+
+``policy`` is anything with SB3's ``predict(observation, state, episode_start,
+deterministic)`` -- the controllers of this package, a Stable-Baselines3 model or
+policy -- or a factory ``policy(env)`` returning one, called once per evaluation
+with the env it will fly.
+
+Metrics (:meth:`EvaluationResult.metrics`, pooled over all steps of all episodes;
+:meth:`EpisodeRecord.metrics` per episode; lengths in m, forces in N, rates in rad/s):
+
+``mae``, ``rmse``
+    per axis (x, y, z) of ``p_world - p_ref``; ``rmse_norm`` of its length.
+``wall_normal_rmse``, ``wall_normal_mae``
+    of the error along the outward normal of the wall nearest to the *reference*
+    position at that step (``env.scene``; positive = away from the wall). The
+    reference, not the vehicle, picks the wall, so a vehicle that strays does not
+    switch the axis it is judged on. NaN without walls.
+``collisions``, ``collision_episodes``
+    steps with a contact (the env counts each contact step) and episodes with at
+    least one; ``min_wall_clearance``: smallest duct-to-wall distance seen.
+``thrust_effort_rms``, ``body_rate_effort_rms``
+    RMS of the commanded collective thrust minus hover thrust ``m g``, and of the
+    commanded body rates (the policy's action through the env's action mapping,
+    before command noise).
+``action_change_rms``, ``thrust_change_rms``, ``body_rate_change_rms``
+    smoothness: RMS of the step-to-step change of the normalised action, of the
+    thrust command (N per step) and of the body-rate command (rad/s per step).
+``solve_ms``
+    for policies exposing ``solve_times`` (seconds per solve, as the MPCs do):
+    median, mean, p99, p99.8 and max in milliseconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import wall_env  # noqa: F401  (registers the environments)
+from wall_env.vehicle import GRAVITY
+
+__all__ = ["evaluate", "EvaluationResult", "EpisodeRecord", "solve_time_stats"]
+
+
+def solve_time_stats(seconds: Sequence[float]) -> dict[str, float]:
+    """Median, mean, p99, p99.8 and max of solve times, in milliseconds (NaN if empty)."""
+    ms = 1e3 * np.asarray(seconds, dtype=float)
+    if ms.size == 0:
+        return {k: math.nan for k in ("median", "mean", "p99", "p99_8", "max")} | {"count": 0}
+    return {
+        "median": float(np.median(ms)),
+        "mean": float(ms.mean()),
+        "p99": float(np.percentile(ms, 99.0)),
+        "p99_8": float(np.percentile(ms, 99.8)),
+        "max": float(ms.max()),
+        "count": int(ms.size),
+    }
+
+
+@dataclass
+class EpisodeRecord:
+    """One flight: per-step arrays (``n`` control steps) and episode facts."""
+
+    seed: int
+    time: np.ndarray  # (n,) s
+    p_world: np.ndarray  # (n, 3) m
+    p_ref: np.ndarray  # (n, 3) m
+    wall_normal: np.ndarray  # (n, 3) outward normal of the wall nearest to p_ref (zeros without walls)
+    collision: np.ndarray  # (n,) bool
+    wall_clearance: np.ndarray  # (n,) m
+    action: np.ndarray  # (n, 4) normalised, as the policy returned it
+    command: np.ndarray  # (n, 4) [T, wx, wy, wz] of the action, before noise
+    hover_thrust: float  # N
+    terminated: bool
+    solve_times: list[float] = field(default_factory=list)  # s
+
+    @property
+    def error(self) -> np.ndarray:
+        return self.p_world - self.p_ref
+
+    @property
+    def wall_normal_error(self) -> np.ndarray:
+        return np.sum(self.error * self.wall_normal, axis=1)
+
+    def metrics(self) -> dict[str, Any]:
+        return _metrics([self])
+
+
+def _rms(x: np.ndarray, axis=None) -> Any:
+    return np.sqrt(np.mean(np.square(x), axis=axis)) if np.size(x) else math.nan
+
+
+def _metrics(episodes: Sequence[EpisodeRecord]) -> dict[str, Any]:
+    error = np.concatenate([e.error for e in episodes])
+    has_walls = all(np.any(e.wall_normal) for e in episodes)
+    normal_error = np.concatenate([e.wall_normal_error for e in episodes])
+    command = [e.command for e in episodes]
+    thrust_dev = np.concatenate([c[:, 0] - e.hover_thrust for c, e in zip(command, episodes)])
+    rates = np.concatenate([c[:, 1:] for c in command])
+    d_action = np.concatenate([np.diff(e.action, axis=0) for e in episodes])
+    d_command = np.concatenate([np.diff(c, axis=0) for c in command])
+    solve = [t for e in episodes for t in e.solve_times]
+    collisions = [int(e.collision.sum()) for e in episodes]
+    out: dict[str, Any] = {
+        "episodes": len(episodes),
+        "steps": int(error.shape[0]),
+        "terminated_early": int(sum(e.terminated for e in episodes)),
+        "mae": np.mean(np.abs(error), axis=0).tolist(),
+        "rmse": _rms(error, axis=0).tolist(),
+        "rmse_norm": float(_rms(np.linalg.norm(error, axis=1))),
+        "wall_normal_rmse": float(_rms(normal_error)) if has_walls else math.nan,
+        "wall_normal_mae": float(np.mean(np.abs(normal_error))) if has_walls else math.nan,
+        "collisions": int(sum(collisions)),
+        "collision_episodes": int(sum(c > 0 for c in collisions)),
+        "min_wall_clearance": float(min(e.wall_clearance.min() for e in episodes)),
+        "thrust_effort_rms": float(_rms(thrust_dev)),
+        "body_rate_effort_rms": float(_rms(rates)),
+        "action_change_rms": float(_rms(d_action)),
+        "thrust_change_rms": float(_rms(d_command[:, 0])),
+        "body_rate_change_rms": float(_rms(d_command[:, 1:])),
+    }
+    if solve:
+        out["solve_ms"] = solve_time_stats(solve)
+    return out
+
+
+@dataclass
+class EvaluationResult:
+    """Every episode of one policy on one task."""
+
+    policy: str
+    env_id: str
+    env_kwargs: dict[str, Any]
+    seeds: list[int]
+    episodes: list[EpisodeRecord]
+
+    def metrics(self) -> dict[str, Any]:
+        """Pooled metrics over all episodes (see the module docstring)."""
+        return _metrics(self.episodes)
+
+    def per_episode(self) -> list[dict[str, Any]]:
+        return [{"seed": e.seed, **e.metrics()} for e in self.episodes]
+
+
+def _policy_name(policy: Any) -> str:
+    return str(getattr(policy, "name", type(policy).__name__))
+
+
+def _wall_normals(scene, p_ref: np.ndarray) -> np.ndarray:
+    if not scene.walls:
+        return np.zeros_like(p_ref)
+    distances = np.abs(scene.wall_distances(p_ref))  # (n_walls, n)
+    normals = np.array([w.normal for w in scene.walls])
+    return normals[np.argmin(distances, axis=0)]
+
+
+def evaluate(
+    policy: Any,
+    env: str | Callable[[], gym.Env],
+    seeds: Sequence[int],
+    env_kwargs: dict[str, Any] | None = None,
+    *,
+    deterministic: bool = True,
+    reset_options: dict[str, Any] | None = None,
+    on_episode: Callable[[EpisodeRecord], None] | None = None,
+) -> EvaluationResult:
+    """Fly ``policy`` for one episode per seed on ``env`` (an env id such as
+    ``"WallInspector/WallSweep-v0"`` made with ``env_kwargs``, or a zero-argument env
+    factory) and return every step's record; see the module docstring.
+
+    ``on_episode`` is called with each finished :class:`EpisodeRecord` (for progress bars).
+    """
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("seeds must name at least one seed")
+    env_kwargs = dict(env_kwargs or {})
+    if isinstance(env, str):
+        env_id = env
+        environment = gym.make(env, **env_kwargs)
+    elif callable(env):
+        if env_kwargs:
+            raise ValueError("env_kwargs only apply to an env id; put them into the env factory instead")
+        environment = env()
+        env_id = getattr(getattr(environment, "spec", None), "id", None) or type(environment.unwrapped).__name__
+    else:
+        raise ValueError(f"env must be an env id or an env factory, got {type(env).__name__}")
+    if not hasattr(policy, "predict"):
+        if not callable(policy):
+            raise ValueError("policy must have a predict() method or be a factory policy(env)")
+        policy = policy(environment)
+    base = environment.unwrapped
+    mapping = base.action_mapping
+    hover_thrust = base.vehicle.mass * GRAVITY
+    episodes = []
+    try:
+        for seed in seeds:
+            episodes.append(_fly(policy, environment, seed, deterministic, reset_options, mapping, hover_thrust))
+            if on_episode is not None:
+                on_episode(episodes[-1])
+    finally:
+        environment.close()
+    return EvaluationResult(_policy_name(policy), env_id, env_kwargs, seeds, episodes)
+
+
+def _fly(policy, env, seed, deterministic, reset_options, mapping, hover_thrust) -> EpisodeRecord:
+    observation, _ = env.reset(seed=seed, options=reset_options)
+    scene = env.unwrapped.scene  # after reset: a randomised stand-off may have moved things
+    solve_log = getattr(policy, "solve_times", None)
+    solve_start = len(solve_log) if isinstance(solve_log, list) else 0
+    rows: dict[str, list] = {k: [] for k in ("time", "p_world", "p_ref", "collision", "wall_clearance", "action")}
+    state, episode_start = None, True
+    terminated = truncated = False
+    while not (terminated or truncated):
+        action, state = policy.predict(observation, state=state, episode_start=np.array([episode_start]),
+                                       deterministic=deterministic)
+        action = np.asarray(action, dtype=float).reshape(4)
+        episode_start = False
+        observation, _, terminated, truncated, info = env.step(action)
+        rows["time"].append(info["time"])
+        rows["p_world"].append(info["p_world"])
+        rows["p_ref"].append(info["p_ref"])
+        rows["collision"].append(bool(info["collision"]))
+        rows["wall_clearance"].append(info["wall_clearance"])
+        rows["action"].append(np.clip(action, -1.0, 1.0))
+    p_ref = np.asarray(rows["p_ref"])
+    action = np.asarray(rows["action"])
+    solve_times = list(solve_log[solve_start:]) if isinstance(solve_log, list) else []
+    return EpisodeRecord(
+        seed=seed,
+        time=np.asarray(rows["time"]),
+        p_world=np.asarray(rows["p_world"]),
+        p_ref=p_ref,
+        wall_normal=_wall_normals(scene, p_ref),
+        collision=np.asarray(rows["collision"]),
+        wall_clearance=np.asarray(rows["wall_clearance"]),
+        action=action,
+        command=mapping.to_physical(action),
+        hover_thrust=hover_thrust,
+        terminated=bool(terminated),
+        solve_times=solve_times,
+    )
