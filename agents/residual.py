@@ -54,8 +54,13 @@ def make_base_controller(name: str, env: gym.Env, **kwargs: Any):
         raise ImportError(f"residual base {name!r} needs the controllers package: {exc}") from exc
     class_name = {"pid": "PID", "scmpc": "SCMPC"}[name]
     cls = getattr(controllers, class_name, None)
+    if cls is None and name == "pid":  # before the package exports it at the top level
+        try:
+            from controllers.pid import PID as cls
+        except ImportError:
+            cls = None
     if cls is None:
-        raise ImportError(f"controllers.{class_name} is not available yet; residual base {name!r} cannot be built")
+        raise ImportError(f"controllers.{class_name} is not available; residual base {name!r} cannot be built")
     return cls.from_env(env.unwrapped, **kwargs)
 
 
