@@ -7,7 +7,7 @@ v_world)`` on their manifold; ``x_0`` is the measured state (Eq. 12's constraint
 (:mod:`controllers.mpc.manifold`), and the cost is a sum over stages
 ``k = 0 .. N-1`` of squared weighted residuals, each stage touching only its own
 block and the previous one (block ``k - 1`` = ``(u_{k-1}, x_k)``; for ``k = 0`` the
-fixed ``(u_applied, x_init)``), which makes the normal equations block-tridiagonal:
+fixed ``(-, x_init)``, whose input slot no residual reads), which makes the normal equations block-tridiagonal:
 
 ==========  =====  ===============================================================
 block       rows   residual (each multiplied by 1 / sigma)
@@ -16,7 +16,7 @@ dynamics    9      Eq. 15: ``p_{k+1} - p_k - dt v_k - dt^2/2 a_k``,
                    ``Log(R_k^T R_{k+1}) - dt omega_k``, ``v_{k+1} - v_k - dt a_k``
 reference   9      Eq. 25 at ``x_{k+1}``: ``p - p_ref``, ``Log(R^T R_ref)``, ``v - v_ref``
 terminal    3      ``p_N - p_ref,N`` (only in the last stage)
-rate        4      Eq. 27: ``u_{k-1} - u_k`` (stages 1 .. N-1; stage 0 only on request)
+rate        4      Eq. 27: ``u_{k-1} - u_k`` (stages 1 .. N-1, as in Eq. 12)
 limit       4      Eq. 26: ``max(u_k - u_max, 0) + max(u_min - u_k, 0)``
 ==========  =====  ===============================================================
 
@@ -143,8 +143,7 @@ class MPCProblem:
     """
 
     def __init__(self, vehicle: VehicleParams, model: AeroModel, scene: Scene, horizon: int = 20,
-                 dt: float = 0.01, weights: MPCWeights | None = None, limits: InputLimits | None = None,
-                 rate_to_applied_command: bool = False):
+                 dt: float = 0.01, weights: MPCWeights | None = None, limits: InputLimits | None = None):
         if not isinstance(horizon, (int, np.integer)) or not 2 <= horizon <= 200:
             raise ValueError(f"horizon must be an integer in [2, 200], got {horizon!r}")
         self.horizon = int(horizon)
@@ -154,7 +153,6 @@ class MPCProblem:
         self.scene = scene
         self.weights = weights if weights is not None else MPCWeights()
         self.limits = limits if limits is not None else InputLimits()
-        self.rate_to_applied_command = bool(rate_to_applied_command)
         self.rotor_positions_body = vehicle.rotor_positions_array
         self.scene_structure = scene.structure
         self.global_size = 2 + RESIDUAL_SIZE + 8 + model.param_size + scene.vector_size
@@ -185,8 +183,7 @@ class MPCProblem:
         # column-major flattening of each R, as CasADi's reshape reads it
         S[StageParamIndex.R_ref] = np.asarray(R_ref).transpose(0, 2, 1).reshape(N, 9).T
         S[StageParamIndex.terminal, N - 1] = 1.0
-        S[StageParamIndex.rate, 1:] = 1.0
-        S[StageParamIndex.rate, 0] = float(self.rate_to_applied_command)
+        S[StageParamIndex.rate, 1:] = 1.0  # stage 0 has no previous input in the horizon
         return S
 
     # ------------------------------------------------------------------ symbolic

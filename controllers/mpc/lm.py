@@ -167,7 +167,7 @@ def build_iteration_function(problem: MPCProblem) -> ca.Function:
     """``lm_iteration(Z[19xN], start[19], S[17xN], global, lambda)
     -> (Z_trial[19xN], cost, cost_trial, predicted_decrease, gradient_inf_norm, step_inf_norm)``.
 
-    ``Z`` holds the blocks ``(u_k, x_{k+1})``, ``start`` the fixed ``(u_applied, x_init)``.
+    ``Z`` holds the blocks ``(u_k, x_{k+1})``, ``start`` the fixed ``(unused input, x_init)``.
     """
     N = problem.horizon
     Z = ca.MX.sym("Z", POINT_SIZE, N)

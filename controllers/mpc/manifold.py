@@ -83,8 +83,10 @@ def so3_log_smooth(R):
     c = (R[0, 0] + R[1, 1] + R[2, 2] - 1) / 2
     e = 1 - c
     series = 1 + e * (1 / 3 + e * (2 / 15 + e * (2 / 35 + e * 8 / 315)))
-    # the closed form only ever sees c <= 1 - _SERIES_LIMIT, where acos and sqrt are smooth
-    c_far = ca.fmax(ca.fmin(c, 1 - _SERIES_LIMIT), -1 + 1e-9)
+    # the closed form is only selected for c <= 1 - _SERIES_LIMIT; its argument is clamped
+    # well inside that (so acos and sqrt stay smooth where it is not selected, and the
+    # clamp's kink never coincides with the switch, where it would halve the derivative)
+    c_far = ca.fmax(ca.fmin(c, 1 - _SERIES_LIMIT / 2), -1 + 1e-9)
     closed = ca.acos(c_far) / ca.sqrt(1 - c_far**2)
     factor = ca.if_else(e < _SERIES_LIMIT, series, closed)
     return factor * _vee_antisymmetric(R)
@@ -93,9 +95,9 @@ def so3_log_smooth(R):
 def so3_exp_smooth(phi):
     """``Exp(phi)`` by Rodrigues' formula with series coefficients near zero (smooth everywhere)."""
     t2 = ca.dot(phi, phi)
-    t2_far = ca.fmax(t2, 1e-6)
-    t = ca.sqrt(t2_far)
     small = t2 < 1e-6
+    t2_far = ca.fmax(t2, 0.5e-6)  # clamp kink away from the switch (see so3_log_smooth)
+    t = ca.sqrt(t2_far)
     a = ca.if_else(small, 1 - t2 / 6 + t2**2 / 120, ca.sin(t) / t)
     b = ca.if_else(small, 0.5 - t2 / 24 + t2**2 / 720, (1 - ca.cos(t)) / t2_far)
     K = skew(phi)

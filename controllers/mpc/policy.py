@@ -87,8 +87,6 @@ class MPC(ControllerPolicy):
     horizon, dt: N steps of dt seconds (paper: 20, 0.01 s).
     weights, limits: :class:`MPCWeights`, :class:`InputLimits` (defaults: the authors' release).
     solver: :class:`LMSettings` (iteration limits, tolerances).
-    rate_to_applied_command: add the control-rate residual between the last applied
-        command and ``u_0`` (not in the paper; off by default).
     max_tilt_deg: tilt limit of the flatness attitude reference.
     model_attitude: attitude reference from flatness with the model's force (default;
         see :mod:`controllers.mpc.reference`), or from kinematics alone.
@@ -99,8 +97,7 @@ class MPC(ControllerPolicy):
     def __init__(self, description: EnvDescription, model: AeroModel | None = None, *,
                  vehicle: VehicleParams | None = None, horizon: int = 20, dt: float = 0.01,
                  weights: MPCWeights | None = None, limits: InputLimits | None = None,
-                 solver: LMSettings | None = None, rate_to_applied_command: bool = False,
-                 max_tilt_deg: float = 80.0, model_attitude: bool = True, force_at_prediction: bool = True):
+                 solver: LMSettings | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True, force_at_prediction: bool = True):
         super().__init__(description)
         if model is not None and not isinstance(model, AeroModel):
             raise ValueError(f"model must be a wall_env.AeroModel, got {type(model).__name__}")
@@ -108,8 +105,7 @@ class MPC(ControllerPolicy):
             raise ValueError(f"vehicle must be a wall_env.VehicleParams, got {type(vehicle).__name__}")
         self.model = model if model is not None else description.nominal_model
         self.model_vehicle = vehicle if vehicle is not None else description.vehicle
-        self.problem = MPCProblem(self.model_vehicle, self.model, description.scene, horizon, dt, weights, limits,
-                                  rate_to_applied_command)
+        self.problem = MPCProblem(self.model_vehicle, self.model, description.scene, horizon, dt, weights, limits)
         self.solver = LevenbergMarquardt(self.problem, solver)
         max_tilt = math.radians(check_range("max_tilt_deg", max_tilt_deg, 1.0, 89.0))
         self.horizon_reference = HorizonReference(description.reference, self.problem, max_tilt, model_attitude)
@@ -170,8 +166,7 @@ class MPC(ControllerPolicy):
                                             p_pred, v_pred)
         S = self.problem.stage_params(refs.p_world, refs.v_world, refs.R_body_to_world)
         Z0 = self.initial_guess(refs) if cold else Z_warm
-        u_applied = memory.get("u_applied", Z0[PointIndex.u, 0])
-        start = pack_point(u_applied, p, R, v)
+        start = pack_point(np.zeros(4), p, R, v)  # its input slot is unused: no rate residual at stage 0
         t_solve = time.perf_counter()
         result = self.solver.solve(Z0, start, S, self.global_params, cold=cold)
         t_end = time.perf_counter()
@@ -179,7 +174,6 @@ class MPC(ControllerPolicy):
             raise SolverFailure(f"non-finite MPC solution (cost {result.cost})")
         memory["Z"] = result.Z
         command = result.Z[PointIndex.u, 0].copy()
-        memory["u_applied"] = command
         self.last_solves[index] = SolveRecord(Z0, start, S, self.global_params, cold, result)
         self.solve_times.append(t_end - t_solve)
         self.step_times.append(t_end - t_start)
