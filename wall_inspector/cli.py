@@ -16,6 +16,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("wall_inspector.demo", "fly a short rollout near a wall, print what happened and write a picture"),
     "bench-env": ("wall_env.benchmark", "measure environment steps per second and reset time"),
     "bench-mpc": ("controllers.benchmark", "time SC-MPC solves in closed loop against IPOPT on the same problems"),
+    "compare": ("wall_inspector.compare", "reproduce the paper's Tables I and II with PID, MPC and SC-MPC (tables, JSON, plots)"),
     "train": ("agents.train", "train a PPO agent on a wall task (checkpoints, TensorBoard, model card)"),
     "readme": ("wall_inspector.readme", "copy result tables written by other commands into README.md"),
 }

@@ -1,0 +1,132 @@
+"""Cascaded PID, the shared policy interface (batching, memory, safety) and the env description."""
+
+from __future__ import annotations
+
+import math
+import types
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import wall_env  # noqa: F401
+from controllers import PID
+from controllers.env_description import PUBLIC_ATTRIBUTES, describe_env
+from controllers.evaluation import evaluate
+from controllers.flatness import attitude_error, attitude_from_thrust, feedforward_body_rates
+from controllers.policy import hover_command
+from wall_env.observation import OBSERVATION_FIELDS
+
+FREE_HOVER = {"standoff": 2.0, "k_s": 0.0}
+
+
+def test_pid_holds_hover_in_free_space_from_a_perturbed_start():
+    result = evaluate(PID.from_env, "WallInspector/WallHover-v0", [0, 1], {**FREE_HOVER, "noise": False})
+    for episode in result.episodes:
+        error = np.linalg.norm(episode.error, axis=1)
+        assert error[0] > 0.03  # the start really is perturbed
+        assert error[-100:].max() < 1e-3  # settled to under a millimetre within 4 s
+        assert error.max() < 0.07
+    assert result.metrics()["collisions"] == 0
+
+
+def test_pid_holds_hover_under_command_noise():
+    metrics = evaluate(PID.from_env, "WallInspector/WallHover-v0", [3], FREE_HOVER).metrics()
+    assert max(metrics["rmse"]) < 0.02
+
+
+def test_pid_tracks_a_slow_circle_away_from_the_wall():
+    result = evaluate(PID.from_env, "WallInspector/WallCircle-v0", [0],
+                      {"standoff": 1.5, "k_s": 0.0, "noise": False, "duration": 6.0})
+    error = np.linalg.norm(result.episodes[0].error, axis=1)
+    assert error[200:].max() < 0.02  # after the 1 s ramp-up, within 2 cm of a 0.3 m circle at 0.31 m/s
+    assert result.metrics()["rmse_norm"] < 0.012
+
+
+def test_pid_is_pulled_into_the_wall_when_suction_beats_its_stiffness():
+    # k_s = 10 N/m on two rotors is 20 N/m of negative stiffness, Kp = 8 1/s^2 cannot hold it
+    metrics = evaluate(PID.from_env, "WallInspector/WallCircle-v0", [0],
+                       {"k_s": 10.0, "d_thr": 0.1, "terminate_on_collision": False, "duration": 4.0}).metrics()
+    assert metrics["collisions"] > 0
+    assert metrics["wall_normal_rmse"] > 0.02
+
+
+def test_batch_prediction_equals_single_predictions():
+    env = gym.make("WallInspector/WallSweep-v0")
+    pid = PID.from_env(env)
+    observations = [env.reset(seed=s)[0] for s in (0, 1, 2)]
+    batch, state = pid.predict(np.stack(observations), episode_start=np.ones(3, bool))
+    assert batch.shape == (3, 4) and batch.dtype == np.float32 and state is None
+    for i, obs in enumerate(observations):
+        single, _ = pid.predict(obs)
+        assert single.shape == (4,)
+        np.testing.assert_allclose(single, batch[i], atol=1e-7)
+
+
+def test_nan_observation_gives_hover_and_a_counted_warning():
+    env = gym.make("WallInspector/WallHover-v0")
+    pid = PID.from_env(env)
+    obs, _ = env.reset(seed=0)
+    bad = obs.copy()
+    bad[OBSERVATION_FIELDS["p_world"]] = np.nan
+    with pytest.warns(RuntimeWarning, match="non-finite observation"):
+        actions, _ = pid.predict(np.stack([obs, bad]))
+    assert np.all(np.isfinite(actions))
+    assert pid.failures == 1
+    # hover thrust (normalised 0) and rates that level the vehicle
+    assert actions[1, 0] == pytest.approx(0.0, abs=1e-7)
+    R = obs[OBSERVATION_FIELDS["R_body_to_world"]].reshape(3, 3)
+    expected = hover_command(env.unwrapped.vehicle.mass, R, 3.0)
+    np.testing.assert_allclose(actions[1, 1:] * 3.0, expected[1:], atol=1e-6)
+
+
+def test_hover_command_levels_a_tilted_vehicle_and_survives_garbage():
+    tilted = attitude_from_thrust(np.array([[1.0, 0.0, 5.0]]), 0.3)[0][0]  # leaning toward +x world
+    command = hover_command(1.0, tilted, 3.0)
+    assert command[0] == pytest.approx(9.81)
+    assert command[2] < -0.5  # pitch back toward level
+    assert np.all(hover_command(1.0, np.full((3, 3), np.nan), 3.0)[1:] == 0.0)
+    assert np.all(hover_command(1.0, np.zeros((3, 3)), 3.0)[1:] == 0.0)
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"kp": (-1.0, 8.0, 10.0)}, "kp"),
+    ({"kv": (4.0, 4.0)}, "kv"),
+    ({"k_attitude": (6.0, 6.0, math.nan)}, "k_attitude"),
+    ({"max_tilt_deg": 95.0}, "max_tilt_deg"),
+    ({"position_error_limit": 0.0}, "position_error_limit"),
+])
+def test_bad_pid_arguments_name_the_argument_and_range(kwargs, name):
+    env = gym.make("WallInspector/WallHover-v0")
+    with pytest.raises(ValueError, match=name):
+        PID.from_env(env, **kwargs)
+
+
+def test_bad_observation_shape_is_rejected():
+    env = gym.make("WallInspector/WallHover-v0")
+    with pytest.raises(ValueError, match="observation must have shape"):
+        PID.from_env(env).predict(np.zeros(47))
+
+
+def test_description_reads_only_public_attributes():
+    env = gym.make("WallInspector/WallSweep-v0")
+    base = env.unwrapped
+    public_only = types.SimpleNamespace(**{name: getattr(base, name) for name in PUBLIC_ATTRIBUTES})
+    pid = PID.from_env(public_only)
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_allclose(pid.predict(obs)[0], PID.from_env(env).predict(obs)[0])
+    with pytest.raises(ValueError, match="lacks"):
+        describe_env(types.SimpleNamespace(vehicle=base.vehicle))
+
+
+def test_flatness_attitude_and_feedforward():
+    R, z = attitude_from_thrust(np.array([[0.0, 0.0, 9.81], [3.0, 0.0, 9.81], [0.0, 0.0, -1.0]]), math.pi / 2)
+    np.testing.assert_allclose(R[0], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-12)  # yaw 90 deg, level
+    assert np.allclose(R[1] @ R[1].T, np.eye(3)) and z[1, 0] > 0.29
+    np.testing.assert_allclose(z[2], [0, 0, 1])  # downward thrust: stay level
+    steep = attitude_from_thrust(np.array([[10.0, 0.0, 0.1]]), 0.0, math.radians(80))[1]
+    assert math.degrees(math.acos(steep[0, 2])) == pytest.approx(80.0)
+    # a jerk along body x tilts the thrust toward x: positive pitch rate
+    omega = feedforward_body_rates(R[:1], 9.81, np.array([[0.0, 1.0, 0.0]]))  # body x is world y at yaw 90
+    assert omega[0, 1] == pytest.approx(1.0 / 9.81)
+    assert np.allclose(attitude_error(R[1], R[1]), 0.0)

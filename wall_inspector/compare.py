@@ -1,0 +1,54 @@
+"""``wall-inspector compare``: the paper's Tables I and II in simulation, with PID, MPC and SC-MPC.
+
+Flies every method on the scenarios of :mod:`controllers.paper_tables` (a progress
+bar counts the flights), prints the Markdown tables and the issue's acceptance
+checks, and writes to ``--out``:
+
+- ``tables.md``: the tables (``wall-inspector readme --set compare=OUT/tables.md``
+  copies them into the README);
+- ``results.json``: pooled and per-flight metrics of every run and the checks;
+- ``table_i_circle.png`` (paper Fig. 6) and ``table_ii_sweep.png`` (paper Fig. 10).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", default="out/compare", help="folder for tables, JSON and figures")
+    parser.add_argument("--tables", choices=("I", "II", "both"), default="both", help="which table(s) to reproduce")
+    parser.add_argument("--seeds-i", type=int, default=5, help="seeds per row of Table I (default 5)")
+    parser.add_argument("--seeds-ii", type=int, default=10, help="seeds of Table II (default 10)")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="shorten every flight to this many seconds (a quick look; not the paper's tables)")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    from controllers import paper_tables as pt
+
+    for name in ("seeds_i", "seeds_ii"):
+        if not 1 <= getattr(args, name) <= 1000:
+            raise SystemExit(f"--{name.replace('_', '-')} must be in [1, 1000], got {getattr(args, name)}")
+    extra = {}
+    if args.duration is not None:
+        if not 0.05 <= args.duration <= 3600:
+            raise SystemExit(f"--duration must be in [0.05, 3600] s, got {args.duration}")
+        extra["duration"] = args.duration
+    scenarios = []
+    if args.tables in ("I", "both"):
+        scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_i)), env_kwargs=extra) for s in pt.TABLE_I]
+    if args.tables in ("II", "both"):
+        scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_ii)), env_kwargs=extra) for s in pt.TABLE_II]
+    t0 = time.perf_counter()
+    results = pt.run_scenarios(scenarios, pt.paper_policies(), progress=not args.no_progress)
+    paths = pt.write_outputs(results, args.out)
+    print(pt.markdown_tables(results))
+    print("Acceptance (issue 3):")
+    for check in pt.acceptance(results):
+        print(f"  [{'PASS' if check['pass'] else 'FAIL'}] {check['check']}: {check['value']:.3g}")
+    print(f"{len(results)} runs in {time.perf_counter() - t0:.0f} s; wrote " + ", ".join(str(p) for p in paths.values()))
+    return 0
