@@ -1,18 +1,18 @@
-"""Evaluating a policy on a wall task: returns, tracking error, collisions.
+"""Evaluating an agent with the same function and seeds as the controllers' tables.
 
-Works with anything that has the Stable-Baselines3 ``predict`` protocol (a loaded
-agent, a residual agent, a controller). Each episode is one seed: the environment is
-reset with that seed, so two policies evaluated with the same seeds meet the same
-start perturbations and command noise draws (as long as they survive equally long).
+:func:`evaluate_agent` runs :func:`controllers.evaluation.evaluate` (one episode per
+seed, ``env.reset(seed=seed)``; the function ``wall-inspector compare`` uses for PID,
+MPC and SC-MPC) and adds the episode returns, which that function does not record,
+through a thin wrapper that sums rewards. The result is one flat dict for the model
+card, lengths in metres:
 
-Metrics (SI units) pooled over all steps of all episodes:
-
-* ``position_rmse_m``: RMS of ``|p - p_ref|``;
-* ``wall_normal_rmse_m`` / ``wall_normal_mae_m``: RMS / mean absolute position error
-  along the normal of the nearest wall (the paper's x for a wall in the y-z plane);
-* ``collisions``: contacts summed over episodes, ``episodes_with_collision``;
-* ``completed``: fraction of episodes that ran to the reference's end;
-* ``mean_return``, ``std_return``, ``mean_length_s``.
+* ``mean_return``, ``std_return``, ``mean_length_s``, ``completed`` (fraction of
+  episodes that reached the reference's end);
+* ``position_rmse_m`` (RMS of ``|p - p_ref|``), ``rmse_xyz_m``, ``mae_xyz_m``;
+* ``wall_normal_rmse_m``, ``wall_normal_mae_m`` (error along the normal of the wall
+  nearest to the reference, the paper's x for the wall tasks);
+* ``collisions`` (contact steps), ``episodes_with_collision``, ``min_wall_clearance_m``;
+* ``action_change_rms`` (smoothness of the normalised action).
 """
 
 from __future__ import annotations
@@ -23,62 +23,62 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from wall_env.observation import OBSERVATION_FIELDS
-
-__all__ = ["evaluate_policy_on_env", "evaluate_policy"]
-
-_NORMAL = OBSERVATION_FIELDS["wall_normal"]
+__all__ = ["ReturnRecorder", "evaluate_agent"]
 
 
-def evaluate_policy_on_env(policy: Any, env: gym.Env, seeds: Iterable[int], deterministic: bool = True) -> dict[str, Any]:
-    """Run one episode per seed on ``env`` (plain wall env, 48-entry observations)."""
-    returns, lengths, completed, collisions = [], [], [], []
-    sq_pos, sq_normal, abs_normal, n_steps = 0.0, 0.0, 0.0, 0
-    dt = float(env.unwrapped.control_dt)
-    for seed in seeds:
-        obs, info = env.reset(seed=int(seed))
-        state, start = None, np.array([True])
-        total, steps, done, truncated = 0.0, 0, False, False
-        while not done:
-            action, state = policy.predict(obs, state=state, episode_start=start, deterministic=deterministic)
-            start = np.array([False])
-            normal = np.asarray(obs[_NORMAL], dtype=float)
-            obs, reward, terminated, truncated, info = env.step(np.asarray(action).reshape(4))
-            error = np.asarray(info["p_world"]) - np.asarray(info["p_ref"])
-            sq_pos += float(error @ error)
-            e_n = float(error @ normal)
-            sq_normal += e_n * e_n
-            abs_normal += abs(e_n)
-            n_steps += 1
-            total += float(reward)
-            steps += 1
-            done = terminated or truncated
-        returns.append(total)
-        lengths.append(steps * dt)
-        completed.append(bool(truncated))
-        collisions.append(int(info["collisions"]))
-    n = max(n_steps, 1)
-    return {
-        "episodes": len(returns),
-        "mean_return": float(np.mean(returns)),
-        "std_return": float(np.std(returns)),
-        "mean_length_s": float(np.mean(lengths)),
-        "completed": float(np.mean(completed)),
-        "collisions": int(np.sum(collisions)),
-        "episodes_with_collision": int(np.sum(np.asarray(collisions) > 0)),
-        "position_rmse_m": float(np.sqrt(sq_pos / n)),
-        "wall_normal_rmse_m": float(np.sqrt(sq_normal / n)),
-        "wall_normal_mae_m": float(abs_normal / n),
-    }
+class ReturnRecorder(gym.Wrapper):
+    """Sums each episode's rewards into ``returns`` (one entry per finished episode)."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        self.returns: list[float] = []
+        self.lengths: list[int] = []
+        self._total, self._steps = 0.0, 0
+
+    def reset(self, **kwargs):
+        self._total, self._steps = 0.0, 0
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._total += float(reward)
+        self._steps += 1
+        if terminated or truncated:
+            self.returns.append(self._total)
+            self.lengths.append(self._steps)
+        return obs, reward, terminated, truncated, info
 
 
-def evaluate_policy(policy: Any, env_id: str, env_kwargs: dict[str, Any] | None = None, seeds: Iterable[int] = range(10),
-                    deterministic: bool = True) -> dict[str, Any]:
-    """:func:`evaluate_policy_on_env` on a fresh ``gym.make(env_id, **env_kwargs)``."""
+def evaluate_agent(policy: Any, env_id: str, env_kwargs: dict[str, Any] | None = None,
+                   seeds: Iterable[int] = range(10), deterministic: bool = True) -> dict[str, Any]:
+    """Fly ``policy`` (an object with ``predict`` or a factory ``env -> policy``) one
+    episode per seed on ``gym.make(env_id, **env_kwargs)``; flat metrics (module docstring)."""
     import wall_env  # noqa: F401  (registers the tasks)
+    from controllers.evaluation import evaluate
 
-    env = gym.make(env_id, **(env_kwargs or {}))
-    try:
-        return evaluate_policy_on_env(policy, env, seeds, deterministic)
-    finally:
-        env.close()
+    recorders: list[ReturnRecorder] = []
+
+    def make() -> gym.Env:
+        recorders.append(ReturnRecorder(gym.make(env_id, **(env_kwargs or {}))))
+        return recorders[-1]
+
+    result = evaluate(policy, make, list(seeds), deterministic=deterministic)
+    m = result.metrics()
+    recorder = recorders[-1]
+    dt = float(recorder.unwrapped.control_dt)
+    return {
+        "episodes": m["episodes"],
+        "mean_return": float(np.mean(recorder.returns)),
+        "std_return": float(np.std(recorder.returns)),
+        "mean_length_s": float(np.mean(recorder.lengths)) * dt,
+        "completed": 1.0 - m["terminated_early"] / m["episodes"],
+        "position_rmse_m": m["rmse_norm"],
+        "rmse_xyz_m": m["rmse"],
+        "mae_xyz_m": m["mae"],
+        "wall_normal_rmse_m": m["wall_normal_rmse"],
+        "wall_normal_mae_m": m["wall_normal_mae"],
+        "collisions": m["collisions"],
+        "episodes_with_collision": m["collision_episodes"],
+        "min_wall_clearance_m": m["min_wall_clearance"],
+        "action_change_rms": m["action_change_rms"],
+    }

@@ -328,20 +328,13 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
 
 def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None, training: dict[str, Any]) -> dict[str, Any]:
     """Evaluate ``checkpoint`` on the task's nominal settings and assemble the model card."""
-    import gymnasium as gym
-
     from agents.envs import env_kwargs
-    from agents.evaluate import evaluate_policy_on_env
-    from agents.policy import load_policy
+    from agents.evaluate import evaluate_agent
+    from agents.policy import policy_factory
 
     kwargs = env_kwargs(config, randomize=False)
     seeds = range(int(config["card_eval"]["seed"]), int(config["card_eval"]["seed"]) + int(config["card_eval"]["episodes"]))
-    env = gym.make(config["env_id"], **kwargs)
-    try:
-        policy = load_policy(checkpoint, env=env)
-        metrics = evaluate_policy_on_env(policy, env, seeds)
-    finally:
-        env.close()
+    metrics = evaluate_agent(policy_factory(checkpoint), config["env_id"], kwargs, seeds)
     info = json.loads((checkpoint / "policy.json").read_text())
     return {
         "env_id": config["env_id"],
@@ -355,7 +348,8 @@ def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None,
         "randomize": {k: list(v) for k, v in config["randomize_ranges"].items()} if config["randomize"] else None,
         "training": training,
         "evaluation": {
-            "scenario": (f"{len(seeds)} episodes, seeds {seeds.start}..{seeds.stop - 1}, deterministic actions, "
+            "scenario": (f"controllers.evaluation.evaluate (the function of the comparison tables): {len(seeds)} "
+                         f"episodes, seeds {seeds.start}..{seeds.stop - 1}, deterministic actions, "
                          f"gym.make({config['env_id']!r}, **{kwargs!r}) (task defaults: k_s 4.1 N/m, d_thr 0.132 m, "
                          "command noise on, unless set here)."),
             "env_kwargs": kwargs,

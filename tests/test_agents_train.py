@@ -13,7 +13,7 @@ import yaml
 import wall_env  # noqa: F401
 from agents import TrainedPolicy, load_policy, policy_factory
 from agents.config import default_config
-from agents.evaluate import evaluate_policy_on_env
+from agents.evaluate import evaluate_agent
 from agents.train import train
 from wall_inspector.cli import main
 
@@ -63,14 +63,15 @@ def test_cli_run_writes_checkpoints_logs_and_card(cli_run):
 def test_cli_checkpoint_loads_and_flies(cli_run):
     policy = load_policy(cli_run / "best")
     assert isinstance(policy, TrainedPolicy) and policy.env_id == "WallInspector/WallHover-v0"
-    env = gym.make("WallInspector/WallHover-v0")
-    metrics = evaluate_policy_on_env(policy, env, seeds=[0, 1])
-    env.close()
-    assert metrics["episodes"] == 2 and metrics["mean_length_s"] > 0.05
-    # same seeds, same deterministic policy: the evaluation repeats exactly
-    env = gym.make("WallInspector/WallHover-v0")
-    assert evaluate_policy_on_env(load_policy(cli_run / "best" / "model.zip"), env, seeds=[0, 1]) == metrics
-    env.close()
+    metrics = evaluate_agent(policy, "WallInspector/WallHover-v0", seeds=[0, 1])
+    assert metrics["episodes"] == 2 and metrics["mean_length_s"] > 0.05 and np.isfinite(metrics["mean_return"])
+    # same seeds, same deterministic policy (loaded through model.zip this time): the evaluation repeats exactly
+    again = evaluate_agent(load_policy(cli_run / "best" / "model.zip"), "WallInspector/WallHover-v0", seeds=[0, 1])
+    assert again == metrics
+    # and the model card's evaluation is this one, on the card's seeds
+    card = json.loads((cli_run / "model_card.json").read_text())
+    assert evaluate_agent(policy_factory(cli_run / "best"), "WallInspector/WallHover-v0",
+                          seeds=card["evaluation"]["seeds"]) == card["evaluation"]["metrics"]
 
 
 def test_policy_factory_gives_a_predictor_for_an_env(cli_run):
