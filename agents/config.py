@@ -45,7 +45,9 @@ _BASE: dict[str, Any] = {
     "randomize_ranges": {},
     "residual": None,  # None, "pid" or "scmpc": learn a correction on top of that controller
     "residual_scale": [0.2, 0.2, 0.2, 0.2],  # largest correction per normalised action entry
-    "residual_base_kwargs": {},  # keywords for the base controller's from_env, e.g. {k_s: 4.1}
+    # keywords for each base controller's from_env: SC-MPC is given the paper's identified
+    # suction model (it is the controller's knowledge, not the simulator's truth)
+    "residual_base_kwargs": {"pid": {}, "scmpc": {"k_s": 4.1, "d_thr": 0.132}},
     "timesteps": 1_000_000,
     "seed": 0,
     "n_envs": 16,  # environments in the vector env
@@ -109,6 +111,7 @@ def _merge(base: dict, update: dict) -> dict:
     out = copy.deepcopy(base)
     for key, value in update.items():
         if isinstance(value, dict) and isinstance(out.get(key), dict) and key not in ("env_kwargs", "randomize_ranges"):
+            # sections merge key by key; env_kwargs and randomize_ranges are replaced whole
             out[key] = _merge(out[key], value)
         else:
             out[key] = copy.deepcopy(value)

@@ -41,7 +41,8 @@ def make_env(config: dict[str, Any], randomize: bool | None = None, monitor: boo
     """One environment for ``config`` (residual-wrapped if ``config["residual"]``)."""
     env = gym.make(config["env_id"], **env_kwargs(config, randomize))
     if config["residual"]:
-        name, base_kwargs = config["residual"], dict(config["residual_base_kwargs"])
+        name = config["residual"]
+        base_kwargs = dict(config["residual_base_kwargs"].get(name) or {})
         env = ResidualActionWrapper(env, lambda e: make_base_controller(name, e, **base_kwargs),
                                     scale=config["residual_scale"])
     if monitor:

@@ -143,7 +143,7 @@ def policy_description(config: dict[str, Any]) -> dict[str, Any]:
     residual = None
     if config["residual"]:
         residual = {"base": config["residual"], "scale": [float(s) for s in config["residual_scale"]],
-                    "base_kwargs": dict(config["residual_base_kwargs"])}
+                    "base_kwargs": dict(config["residual_base_kwargs"].get(config["residual"]) or {})}
     return {"env_id": config["env_id"], "algorithm": "PPO", "residual": residual}
 
 
