@@ -119,3 +119,30 @@ def test_residual_on_pid_if_available():
     # a constant correction of more thrust makes the residual agent climb above the PID's flight
     climbed = fly(True, np.array([1.0, 0.0, 0.0, 0.0]))
     assert climbed[-1, 2] > pid_alone[-1, 2] + 0.01
+
+
+def test_residual_agent_trains_saves_and_loads_on_pid(tmp_path):
+    from agents import load_policy
+    from agents.residual import make_base_controller
+    from wall_inspector.cli import main
+
+    try:
+        make_base_controller("pid", gym.make("WallInspector/WallHover-v0"))
+    except ImportError as exc:
+        pytest.skip(f"the PID controller has not landed yet ({exc})")
+    out = tmp_path / "res"
+    assert main(["train", "--env", "WallHover-v0", "--residual", "pid", "--timesteps", "256", "--n-envs", "2",
+                 "--workers", "1", "--out", str(out), "--set", "ppo.n_steps=128", "--set", "ppo.batch_size=128",
+                 "--set", "ppo.n_epochs=1", "--set", "card_eval.episodes=1", "--checkpoint-freq", "0",
+                 "--no-progress", "--quiet"]) == 0
+    with pytest.raises(ValueError, match="pass env="):
+        load_policy(out)
+    env = gym.make("WallInspector/WallHover-v0")
+    policy = load_policy(out, env=env)
+    assert isinstance(policy, ResidualPolicy)
+    obs, _ = env.reset(seed=2)
+    action, _ = policy.predict(obs)
+    base_action, _ = make_base_controller("pid", env).predict(obs)
+    correction, _ = load_policy(out, env=env).correction.predict(np.concatenate([obs, base_action]).astype(np.float32))
+    np.testing.assert_allclose(action, np.clip(base_action + 0.2 * np.clip(correction, -1, 1), -1, 1), atol=1e-6)
+    env.close()
