@@ -225,6 +225,10 @@ def copy_checkpoint(source: str | Path, target: str | Path, extra_files: tuple[s
 
 # ---------------------------------------------------------------------- model cards
 def _fmt(value: Any) -> str:
+    if isinstance(value, (list, tuple)):
+        return ", ".join(_fmt(v) for v in value)
+    if isinstance(value, np.generic):
+        value = value.item()
     if isinstance(value, float):
         if math.isnan(value):
             return "n/a"

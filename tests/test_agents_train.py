@@ -134,3 +134,18 @@ def test_loaded_policy_acts_exactly_like_the_trained_model(tmp_path):
     # the normalisation is really applied: raw observations give other actions
     raw, _ = trained.model.predict(batch, deterministic=True)
     assert not np.allclose(raw, expected)
+
+
+def test_ship_puts_the_best_checkpoint_and_card_where_load_policy_finds_them(cli_run, tmp_path, monkeypatch):
+    import agents.policy
+    from agents.train import ship
+
+    monkeypatch.setattr(agents.policy, "PRETRAINED_DIR", tmp_path / "pretrained")
+    target = ship(cli_run, "WallInspector/WallHover-v0")
+    assert target == tmp_path / "pretrained" / "wall_hover"
+    assert sorted(p.name for p in target.iterdir()) == ["model.zip", "model_card.json", "model_card.md",
+                                                       "normalization.json", "policy.json"]
+    shipped = load_policy("WallHover-v0")
+    best = load_policy(cli_run / "best")
+    obs = np.asarray(json.loads((target / "policy.json").read_text())["check"]["observations"], dtype=np.float32)
+    np.testing.assert_array_equal(shipped.predict(obs)[0], best.predict(obs)[0])
