@@ -1,0 +1,111 @@
+"""Open-loop prediction error: replay the logged commands through a model and compare positions.
+
+From the state logged at a window's start, the translational model (paper Eq. 5)
+
+    m dv/dt = -m g e3 + T R e3 + F_M(p, R, v, omega, f)
+
+is integrated over a fixed horizon (default 0.5 s) with the logged collective thrust
+command held over each sample step, and ``F_M`` the :class:`~wall_env.aero.AeroModel`
+force evaluated at the *predicted* position and velocity (so an effect that depends
+on where the vehicle is, such as wall suction, acts where the model thinks the
+vehicle is). The attitude follows the logged attitude (the body-rate loop is the
+vehicle's and not part of the aerodynamic model; integrating the noisy rate commands
+would add an attitude random walk common to every model). The error is the distance
+between predicted and logged position at the end of the horizon; its RMS over all
+windows is ``prediction_rms_m``.
+
+Windows start every ``stride_s`` seconds and are evaluated with the model fitted
+without the cross-validation fold of their start sample; a window that would leave
+its fold's time block is not used, so every prediction is of data the model was
+not fitted to. The start velocity and position are the smoothed log values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from discovery.aero_eval import SampleStates
+from discovery.residuals import FlightData, Segment
+from wall_env.aero import AeroModel
+
+__all__ = ["PredictionWindows", "windows", "predict", "prediction_errors", "DEFAULT_HORIZON_S", "DEFAULT_STRIDE_S"]
+
+DEFAULT_HORIZON_S = 0.5
+DEFAULT_STRIDE_S = 0.1
+
+
+@dataclass
+class PredictionWindows:
+    """Start indices of prediction windows in one segment, with their fold and length in samples."""
+
+    segment: int
+    starts: np.ndarray  # (w,) sample index of each start
+    steps: int  # samples to the horizon
+    fold: np.ndarray  # (w,) fold of each window
+
+
+def windows(data: FlightData, horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S) -> list[PredictionWindows]:
+    """Prediction windows of every segment that stay inside one fold's time block."""
+    out = []
+    for index, seg in enumerate(data.segments):
+        dt = float(np.median(np.diff(seg.t)))
+        steps = int(round(horizon_s / dt))
+        stride = max(1, int(round(stride_s / dt)))
+        if seg.n <= steps + 1:
+            continue
+        starts = np.arange(0, seg.n - steps - 1, stride)
+        same_fold = seg.fold[starts] == seg.fold[starts + steps]
+        # a window may not straddle two blocks of the same fold either: check the time span
+        contiguous = np.array([np.all(seg.fold[s:s + steps + 1] == seg.fold[s]) for s in starts], dtype=bool)
+        keep = same_fold & contiguous
+        if keep.any():
+            out.append(PredictionWindows(index, starts[keep], steps, seg.fold[starts[keep]]))
+    return out
+
+
+def predict(seg: Segment, starts: np.ndarray, steps: int, model: AeroModel, rotor_positions_body: np.ndarray,
+            theta: np.ndarray | None = None) -> np.ndarray:
+    """Predicted positions ``(w, 3)`` at ``steps`` samples after each start, replaying the logged thrust.
+
+    ``theta``: the model's parameters, ``(param_size,)`` or one row per window (default: the model's own).
+    """
+    theta = model.theta() if theta is None else np.asarray(theta, dtype=float)
+    evaluator = seg.evaluator(model, rotor_positions_body) if model.effects else None
+    m = seg.states.mass
+    g = np.array([0.0, 0.0, seg.gravity])
+    p = seg.states.p_world[starts].copy()
+    v = seg.states.v_world[starts].copy()
+    R_all, w_all, f_all = seg.states.R_body_to_world, seg.states.omega_body, seg.states.rotor_thrusts
+    for j in range(steps):
+        k = starts + j
+        dt = (seg.t[k + 1] - seg.t[k])[:, None]
+        z_body = 0.5 * (R_all[k, :, 2] + R_all[k + 1, :, 2])
+        force = seg.thrust[k, None] * z_body
+        if evaluator is not None:
+            states = SampleStates(p, R_all[k], v, w_all[k], f_all[k], m)
+            force = force + evaluator.force(states, theta)
+        a = force / m - g
+        p = p + dt * v + 0.5 * dt**2 * a
+        v = v + dt * a
+    return p
+
+
+def prediction_errors(data: FlightData, model: AeroModel, fold_theta: list[np.ndarray] | None = None,
+                      horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S) -> np.ndarray:
+    """Position errors (m) at the horizon of every held-out window.
+
+    ``model`` gives the structure; ``fold_theta[k]`` its parameters fitted without fold
+    ``k`` (default: the model's own parameters for every fold).
+    """
+    errors = []
+    for w in windows(data, horizon_s, stride_s):
+        seg = data.segments[w.segment]
+        theta = None
+        if fold_theta is not None:
+            theta = np.stack([fold_theta[k] for k in w.fold]) if model.param_size else None
+        predicted = predict(seg, w.starts, w.steps, model, data.rotor_positions_body, theta)
+        measured = seg.p_measured[w.starts + w.steps]
+        errors.append(np.linalg.norm(predicted - measured, axis=1))
+    return np.concatenate(errors) if errors else np.zeros(0)

@@ -1,0 +1,210 @@
+"""The force residual of paper Eq. 28 at every sample, against any model built from the effects library.
+
+Eq. 28 reads ``r = m a + m g e3 - R (e3 T + F_drag) - F_s``: what the accelerometer (or
+the differentiated velocity) says the vehicle felt, minus what the model says acted on
+it. Here the modelled part is the thrust plus an :class:`~wall_env.aero.AeroModel`'s
+force (the nominal model's is the vehicle's linear drag, paper Eq. 4), evaluated
+through the library's own CasADi functions (:class:`~discovery.aero_eval.ForceEvaluator`).
+
+Consistent smoothing (see :mod:`discovery.differentiation`): ``m a`` is the
+local-polynomial derivative of the logged velocity and every modelled force is
+averaged over each sample step and smoothed with the matched kernel, so that::
+
+    y_k     = m D v_k + m g e3 - K[T R e3]_k           measured aerodynamic force (N)
+    r_k(M)  = y_k - K[F_M]_k                            residual against model M (N)
+
+where ``K`` is the matched kernel over steps, ``T`` the collective thrust of the step
+(the command, held over the step, or the sum of logged rotor thrusts) and ``F_M`` the
+aerodynamic force of model ``M`` at the samples. With a measured acceleration the
+first term is ``m K[a]`` instead. Effects are evaluated at the smoothed position and
+velocity and the logged attitude and body rates.
+
+:class:`FlightData` holds every segment of every log prepared this way, with the
+cross-validation folds (:attr:`Segment.fold`) that all held-out figures use.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from discovery.aero_eval import ForceEvaluator, SampleStates
+from discovery.differentiation import LocalPolynomial
+from discovery.flight_log import FlightLog, NominalVehicle
+from wall_env.aero import AeroModel
+from wall_env.model_file import nominal_aero_model
+from wall_env.scene import Scene
+
+__all__ = ["Segment", "FlightData", "prepare", "step_average_samples", "DEFAULT_WINDOW_S", "DEFAULT_BLOCK_S",
+           "DEFAULT_FOLDS"]
+
+DEFAULT_WINDOW_S = 1.0  # s, smoothing window of the differentiator (both sides of Eq. 28 alike)
+DEFAULT_BLOCK_S = 4.0  # s, length of the time blocks dealt to cross-validation folds
+DEFAULT_FOLDS = 5
+
+
+def step_average_samples(x: np.ndarray) -> np.ndarray:
+    """Trapezoidal average over each step of per-sample values ``(n, ...) -> (n - 1, ...)``."""
+    return 0.5 * (x[1:] + x[:-1])
+
+
+@dataclass
+class Segment:
+    """One gap-free stretch of one log, ready for residuals and fits (SI, frames in the names)."""
+
+    log_index: int
+    source: str
+    t: np.ndarray  # (n,) s
+    states: SampleStates  # smoothed position and velocity, logged attitude and rates, rotor thrusts
+    thrust: np.ndarray  # (n,) N, collective thrust of the step starting at each sample
+    omega_cmd_body: np.ndarray  # (n, 3) rad/s
+    kernel: LocalPolynomial
+    scene: Scene
+    gravity: float
+    measured_force: np.ndarray  # (n, 3) N, y_k: the aerodynamic force the data show
+    fold: np.ndarray  # (n,) int, the cross-validation fold each sample is held out in
+    train_mask: np.ndarray  # (K, n) bool, samples usable for fitting when fold k is held out
+    p_measured: np.ndarray = field(repr=False, default=None)  # (n, 3) logged (unsmoothed) position
+    evaluators: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def n(self) -> int:
+        return len(self.t)
+
+    def evaluator(self, model: AeroModel, rotor_positions_body: np.ndarray) -> ForceEvaluator:
+        """A cached :class:`ForceEvaluator` of ``model``'s structure for this segment's scene."""
+        key = model.structure_key
+        if key not in self.evaluators:
+            self.evaluators[key] = ForceEvaluator(model, rotor_positions_body, self.scene, self.gravity)
+        return self.evaluators[key]
+
+    def smooth_force(self, force_samples: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """``K[F]``: matched smoothing of per-sample forces ``(n, 3, ...)`` (only at ``rows`` if given)."""
+        return self.kernel.step_average(step_average_samples(force_samples), rows)
+
+    @property
+    def fit_rows(self) -> np.ndarray:
+        """Sample indices whose residuals the fits use: every ``window // 10``-th sample."""
+        return np.arange(0, self.n, max(1, self.kernel.window // 10))
+
+
+@dataclass
+class FlightData:
+    """All segments of all logs, the nominal vehicle and the nominal model."""
+
+    segments: list[Segment]
+    vehicle: NominalVehicle
+    n_folds: int
+    sources: list[str]
+
+    @property
+    def nominal_model(self) -> AeroModel:
+        return nominal_aero_model(self.vehicle.to_vehicle_params())
+
+    @property
+    def rotor_positions_body(self) -> np.ndarray:
+        return self.vehicle.rotor_positions_array
+
+    @property
+    def n_samples(self) -> int:
+        return sum(s.n for s in self.segments)
+
+    def model_force(self, model: AeroModel) -> list[np.ndarray]:
+        """``K[F_M]`` per segment for ``model`` at its current parameters."""
+        out = []
+        for seg in self.segments:
+            force = seg.evaluator(model, self.rotor_positions_body).force(seg.states, model.theta())
+            out.append(seg.smooth_force(force))
+        return out
+
+    def residuals(self, model: AeroModel) -> list[np.ndarray]:
+        """Force residual ``r_k(M)`` per segment, ``(n, 3)`` N."""
+        return [seg.measured_force - f for seg, f in zip(self.segments, self.model_force(model))]
+
+    def concat(self, per_segment: list[np.ndarray]) -> np.ndarray:
+        return np.concatenate(per_segment, axis=0)
+
+    @property
+    def folds(self) -> np.ndarray:
+        return self.concat([s.fold for s in self.segments])
+
+    @property
+    def times(self) -> np.ndarray:
+        return self.concat([s.t for s in self.segments])
+
+
+def _fold_assignment(t: np.ndarray, t0: float, block_s: float, n_folds: int, guard_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Fold of each sample (blocks of ``block_s`` dealt round robin) and the training masks.
+
+    Training for fold k excludes fold k and the samples within ``guard_s`` of it, whose
+    smoothing windows overlap the held-out block.
+    """
+    block = np.floor((t - t0) / block_s).astype(int)
+    fold = block % n_folds
+    train = np.empty((n_folds, len(t)), dtype=bool)
+    for k in range(n_folds):
+        held = fold == k
+        near = held.copy()
+        if held.any():
+            # distance in time to the nearest held-out sample
+            held_t = t[held]
+            idx = np.searchsorted(held_t, t)
+            before = np.abs(t - held_t[np.clip(idx - 1, 0, len(held_t) - 1)])
+            after = np.abs(held_t[np.clip(idx, 0, len(held_t) - 1)] - t)
+            near = np.minimum(before, after) <= guard_s
+        train[k] = ~near
+    return fold, train
+
+
+def prepare(logs: list[FlightLog], *, window_s: float = DEFAULT_WINDOW_S, order: int = 2,
+            block_s: float = DEFAULT_BLOCK_S, n_folds: int = DEFAULT_FOLDS) -> FlightData:
+    """Smooth, differentiate and split the logs into segments with their measured aerodynamic force.
+
+    All logs must share one vehicle block (they describe one vehicle); scenes may differ.
+    A log shorter than ``2 n_folds block_s`` gets blocks of ``duration / (2 n_folds)``
+    (at least two smoothing windows).
+    """
+    if not logs:
+        raise ValueError("discovery needs at least one flight log")
+    vehicle = logs[0].vehicle
+    for log in logs[1:]:
+        if log.vehicle != vehicle:
+            raise ValueError(f"{log.source}: its vehicle block differs from that of {logs[0].source}; "
+                             "discover one vehicle at a time")
+    segments: list[Segment] = []
+    e3 = np.array([0.0, 0.0, 1.0])
+    # short logs get shorter blocks so every fold holds some of each log (never below two windows)
+    blocks = [max(min(block_s, log.duration / (2 * n_folds)), 2 * window_s) for log in logs]
+    for index, log in enumerate(logs):
+        R_all = log.R_body_to_world
+        for part in log.segments():
+            t = log.t[part]
+            if len(t) < 4 * order + 4:
+                continue  # too short to differentiate reliably
+            kernel = LocalPolynomial(t, window_s, order)
+            m = vehicle.mass
+            R = R_all[part]
+            v_raw = log.v_world[part]
+            if log.rotor_thrusts is not None:
+                rotor = log.rotor_thrusts[part]
+                thrust = rotor.sum(axis=1)
+            else:
+                thrust = log.thrust_cmd[part]
+                rotor = np.repeat(thrust[:, None] / 4.0, 4, axis=1)
+            if log.a_world is not None:
+                accel_term = m * kernel.step_average(step_average_samples(log.a_world[part]))
+            else:
+                accel_term = m * kernel.derivative(v_raw)
+            z_body = R[:, :, 2]
+            thrust_steps = thrust[:-1, None] * step_average_samples(z_body)  # command held over each step
+            measured = accel_term + m * log.gravity * e3 - kernel.step_average(thrust_steps)
+            states = SampleStates(kernel.smooth(log.p_world[part]), R, kernel.smooth(v_raw), log.omega_body[part],
+                                  rotor, m)
+            fold, train = _fold_assignment(t, float(log.t[0]), blocks[index], n_folds,
+                                           guard_s=0.5 * (kernel.window + 1) * float(np.median(np.diff(t))))
+            segments.append(Segment(index, log.source, t, states, thrust, log.omega_cmd_body[part], kernel,
+                                    log.scene, log.gravity, measured, fold, train, log.p_world[part]))
+    if not segments:
+        raise ValueError("no log has a segment long enough to differentiate")
+    return FlightData(segments, vehicle, n_folds, [log.source for log in logs])
