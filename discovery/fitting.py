@@ -1,0 +1,316 @@
+"""Fitting effects to force residuals: nonlinear least squares with the library's own Jacobians.
+
+Given the nominal residual ``r_nom`` (:mod:`discovery.residuals`) and a set of effects,
+:class:`EffectFit` finds the parameters that minimise ``sum_k |r_nom,k - sum_i K[F_i(theta_i)]_k|^2``
+with :func:`scipy.optimize.least_squares` (trust-region reflective, within each
+parameter's range), the Jacobian being CasADi's derivative of the same effect
+definition the simulator uses (:class:`~discovery.aero_eval.ForceEvaluator`).
+
+Speed without shortcuts in the model:
+
+- an effect whose force is affine in its parameters (drag, constant force, thrust
+  scale; checked numerically on the data, never assumed from its name) is evaluated
+  once; its residual at any parameter value is then exact linear algebra;
+- nonlinear effects (wall suction's threshold, ground and ceiling radius) are fitted
+  from a few starting points (:data:`STARTS`) and the best solution kept.
+
+Fits and cross-validation use every ``window / 10``-th residual row
+(:attr:`~discovery.residuals.Segment.fit_rows`; rows a tenth of the smoothing window
+apart carry nearly the same information); :func:`out_of_fold_residuals` gives the
+held-out residual of a result at every sample for the reported figures.
+Standard errors come from the Jacobian at the solution, ``sigma^2 (J^T J)^-1``, inflated
+by the integrated autocorrelation time of the residual rows (smoothed residuals of
+neighbouring samples are not independent).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from discovery.residuals import FlightData
+from wall_env.aero import AeroModel
+from wall_env.effects import Effect, make_effect
+
+__all__ = ["STARTS", "EffectFit", "FitResult", "applicable", "autocorrelation_time", "out_of_fold_residuals"]
+
+# Starting points for effects whose force is not affine in their parameters (plausible
+# physical values; the fit is bounded by each parameter's range from the library).
+STARTS: dict[str, list[dict[str, Any]]] = {
+    "wall_suction": [{"k_s": 5.0, "d_thr": d} for d in (0.06, 0.1, 0.15, 0.22, 0.32)],
+    "ground_effect": [{"radius": r} for r in (0.03, 0.06, 0.12, 0.24)],
+    "ceiling_effect": [{"radius": r} for r in (0.03, 0.06, 0.12, 0.24)],
+}
+
+
+def applicable(effect: Effect, data: FlightData) -> bool:
+    """Whether any segment's scene has what ``effect`` acts against."""
+    return any(effect.applies_to(seg.scene.structure) for seg in data.segments)
+
+
+def autocorrelation_time(residual: np.ndarray, max_lag: int = 400) -> float:
+    """Integrated autocorrelation time (in samples, >= 1) of a residual ``(n, d)``, pooled over columns."""
+    x = residual - residual.mean(axis=0)
+    n = len(x)
+    if n < 8:
+        return 1.0
+    var = float(np.sum(x * x))
+    if var <= 0:
+        return 1.0
+    tau = 1.0
+    for lag in range(1, min(max_lag, n // 4)):
+        rho = float(np.sum(x[lag:] * x[:-lag])) / var
+        if rho <= 0.05:
+            break
+        tau += 2.0 * rho
+    return tau
+
+
+@dataclass
+class FitResult:
+    """Fitted effects and what the fit says about them."""
+
+    effects: list[Effect]  # with fitted parameters
+    theta: np.ndarray  # all parameters, packed in effect order
+    param_std: np.ndarray  # standard errors, same packing
+    cost: float  # 0.5 * sum of squared residuals on the fitted samples
+    n_rows: int  # residual rows (3 per sample)
+    success: bool
+    message: str = ""
+    fold_theta: list[np.ndarray] = field(default_factory=list)  # per cross-validation fold
+
+    def param_dicts(self) -> list[dict[str, Any]]:
+        return [e.params_dict() for e in self.effects]
+
+    def std_dicts(self) -> list[dict[str, Any]]:
+        out, index = [], 0
+        for e in self.effects:
+            size = e.param_size
+            out.append(e.params_dict(self.param_std[index:index + size]))
+            index += size
+        return out
+
+
+class _Term:
+    """One effect's contribution ``K[F(theta)]`` at every segment's fit rows, with caching."""
+
+    def __init__(self, data: FlightData, effect: Effect):
+        self.data = data
+        self.effect = effect
+        self.model = AeroModel([effect])
+        self.size = effect.param_size
+        self.low, self.high = effect.param_bounds()
+        self._evaluators = [seg.evaluator(self.model, data.rotor_positions_body) for seg in data.segments]
+        self._active = [effect.applies_to(seg.scene.structure) for seg in data.segments]
+        self._rows = [seg.fit_rows for seg in data.segments]
+        self._cache_theta: np.ndarray | None = None
+        self._cache: tuple[list[np.ndarray], list[np.ndarray]] | None = None
+        self.affine = False
+        self._affine_base: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+        self._check_affine()
+
+    def _evaluate(self, theta: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        forces, jacobians = [], []
+        for seg, ev, active, rows in zip(self.data.segments, self._evaluators, self._active, self._rows):
+            if not active:
+                forces.append(np.zeros((len(rows), 3)))
+                jacobians.append(np.zeros((len(rows), 3, self.size)))
+                continue
+            f, j = ev.force_and_jacobian(seg.states, theta)
+            forces.append(seg.smooth_force(f, rows))
+            jacobians.append(seg.smooth_force(j, rows))
+        return forces, jacobians
+
+    def _check_affine(self) -> None:
+        """An effect is affine if its Jacobian is the same at two distant parameter values."""
+        a = np.clip(self.effect.param_vector(), self.low, self.high)
+        span = np.where(np.isfinite(self.high - self.low), self.high - self.low, 1.0)
+        b = np.clip(a + 0.137 * span + 0.01, self.low, self.high)
+        fa, ja = self._evaluate(a)
+        fb, jb = self._evaluate(b)
+        scale = max(max((np.abs(j).max() if j.size else 0.0) for j in ja), 1e-12)
+        same = all(np.allclose(x, y, rtol=1e-9, atol=1e-9 * scale) for x, y in zip(ja, jb))
+        if same:
+            self.affine = True
+            self._affine_base = [(f, j, a) for f, j in zip(fa, ja)]
+
+    def evaluate(self, theta: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, p)`` per segment at the fit rows."""
+        theta = np.asarray(theta, dtype=float)
+        if self.affine:
+            forces = [f + j @ (theta - a) for f, j, a in self._affine_base]
+            return forces, [j for _, j, _ in self._affine_base]
+        if self._cache_theta is not None and np.array_equal(theta, self._cache_theta):
+            return self._cache
+        self._cache = self._evaluate(theta)
+        self._cache_theta = theta.copy()
+        return self._cache
+
+
+class EffectFit:
+    """Least-squares fit of a set of effects to the nominal force residual.
+
+    ``EffectFit(data, [make_effect("wall_suction"), ...], nominal_residual)``, then
+    :meth:`fit` (all data or per-segment masks over the fit rows), :meth:`residuals` at
+    any parameters and :meth:`cross_validate`. Everything here works on each segment's
+    :attr:`~discovery.residuals.Segment.fit_rows`; :func:`out_of_fold_residuals`
+    evaluates a result on every sample.
+    """
+
+    def __init__(self, data: FlightData, effects: list[Effect], nominal_residual: list[np.ndarray],
+                 terms: dict[str, _Term] | None = None):
+        self.data = data
+        self.templates = list(effects)
+        self.rows = [seg.fit_rows for seg in data.segments]
+        self.r_nom = [r[rows] for r, rows in zip(nominal_residual, self.rows)]
+        self.folds = [seg.fold[rows] for seg, rows in zip(data.segments, self.rows)]
+        cache = terms if terms is not None else {}
+        self.terms = []
+        for effect in effects:
+            if effect.name not in cache:
+                cache[effect.name] = _Term(data, effect)
+            self.terms.append(cache[effect.name])
+        self.sizes = [t.size for t in self.terms]
+        self.low = np.concatenate([t.low for t in self.terms]) if self.terms else np.zeros(0)
+        self.high = np.concatenate([t.high for t in self.terms]) if self.terms else np.zeros(0)
+
+    # ------------------------------------------------------------------ residuals
+    def _split(self, theta: np.ndarray) -> list[np.ndarray]:
+        out, index = [], 0
+        for size in self.sizes:
+            out.append(theta[index:index + size])
+            index += size
+        return out
+
+    def residuals(self, theta: np.ndarray) -> list[np.ndarray]:
+        """Residual per segment ``(m, 3)`` at the fit rows with all effects at ``theta``."""
+        out = [r.copy() for r in self.r_nom]
+        for term, th in zip(self.terms, self._split(np.asarray(theta, dtype=float))):
+            forces, _ = term.evaluate(th)
+            for r, f in zip(out, forces):
+                r -= f
+        return out
+
+    def _stacked(self, theta: np.ndarray, masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        residual = self.residuals(theta)
+        jac_parts = [[] for _ in self.data.segments]
+        for term, th in zip(self.terms, self._split(theta)):
+            _, jacobians = term.evaluate(th)
+            for s, j in enumerate(jacobians):
+                jac_parts[s].append(-j)
+        rows_r, rows_j = [], []
+        for s, mask in enumerate(masks):
+            rows_r.append(residual[s][mask].reshape(-1))
+            j = np.concatenate(jac_parts[s], axis=2)[mask]  # (m, 3, p)
+            rows_j.append(j.reshape(-1, j.shape[2]))
+        return np.concatenate(rows_r), np.concatenate(rows_j, axis=0)
+
+    # ------------------------------------------------------------------ fitting
+    def _solve(self, theta0: np.ndarray, masks: list[np.ndarray]) -> Any:
+        cache: dict[str, Any] = {}
+
+        def both(theta):
+            key = theta.tobytes()
+            if cache.get("key") != key:
+                cache["key"] = key
+                cache["value"] = self._stacked(theta, masks)
+            return cache["value"]
+
+        x0 = np.clip(theta0, self.low, self.high)
+        # least_squares needs strictly feasible starts inside the bounds
+        inside = np.clip(x0, self.low + 1e-9 * (1 + np.abs(self.low)), self.high - 1e-9 * (1 + np.abs(self.high)))
+        return least_squares(lambda th: both(th)[0], inside, jac=lambda th: both(th)[1], bounds=(self.low, self.high),
+                             method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=200)
+
+    def starts(self, previous: dict[str, np.ndarray] | None = None) -> list[np.ndarray]:
+        """Starting points: previous values where known, else the effect's default or :data:`STARTS`."""
+        per_term: list[list[np.ndarray]] = []
+        for term, template in zip(self.terms, self.templates):
+            if previous and template.name in previous:
+                per_term.append([previous[template.name]])
+            elif term.affine or template.name not in STARTS:
+                per_term.append([template.param_vector()])
+            else:
+                options = []
+                for values in STARTS[template.name]:
+                    options.append(make_effect(template.name, **values, **template.option_values).param_vector())
+                per_term.append(options)
+        # one start per option of the term with most options; the others keep their first
+        n = max((len(o) for o in per_term), default=1)
+        return [np.concatenate([o[min(i, len(o) - 1)] for o in per_term]) if per_term else np.zeros(0)
+                for i in range(n)]
+
+    def fit(self, masks: list[np.ndarray] | None = None, previous: dict[str, np.ndarray] | None = None,
+            theta0: np.ndarray | None = None) -> FitResult:
+        """Fit on the fit rows selected by ``masks`` (all if None), from several starts."""
+        masks = masks or [np.ones(len(rows), dtype=bool) for rows in self.rows]
+        if not self.terms:  # nothing to fit: the nominal model
+            rows = np.concatenate([r[m].reshape(-1) for r, m in zip(self.r_nom, masks)])
+            return FitResult([], np.zeros(0), np.zeros(0), 0.5 * float(rows @ rows), rows.size, True, "no parameters")
+        starts = [theta0] if theta0 is not None else self.starts(previous)
+        best = None
+        for x0 in starts:
+            result = self._solve(np.asarray(x0, dtype=float), masks)
+            if best is None or result.cost < best.cost:
+                best = result
+        theta = best.x
+        std = self._standard_errors(theta, masks, best.jac, best.fun)
+        effects = [template.with_params(th) for template, th in zip(self.templates, self._split(theta))]
+        return FitResult(effects, theta, std, float(best.cost), int(best.fun.size), bool(best.success), best.message)
+
+    def _standard_errors(self, theta: np.ndarray, masks: list[np.ndarray], jac: np.ndarray, fun: np.ndarray) -> np.ndarray:
+        n, p = jac.shape
+        if p == 0:
+            return np.zeros(0)
+        dof = max(n - p, 1)
+        sigma2 = float(fun @ fun) / dof
+        residual = self.residuals(theta)
+        taus = [autocorrelation_time(r[m]) for r, m in zip(residual, masks) if m.sum() > 8]
+        tau = float(np.mean(taus)) if taus else 1.0
+        cov = np.linalg.pinv(jac.T @ jac) * sigma2 * tau
+        return np.sqrt(np.clip(np.diag(cov), 0.0, None))
+
+    # ------------------------------------------------------------------ cross-validation
+    def cross_validate(self, full: FitResult) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Out-of-fold residuals per segment at the fit rows, each fold refitted (from ``full``) without it.
+
+        Returns the out-of-fold residuals and the fold parameter vectors (also stored in ``full.fold_theta``).
+        """
+        out = [np.empty_like(r) for r in self.r_nom]
+        fold_theta = []
+        for k in range(self.data.n_folds):
+            masks = [seg.train_mask[k][rows] for seg, rows in zip(self.data.segments, self.rows)]
+            if self.terms and any(m.any() for m in masks):
+                theta_k = self._solve(full.theta, masks).x
+            else:
+                theta_k = full.theta.copy()
+            fold_theta.append(theta_k)
+            residual = self.residuals(theta_k)
+            for s, folds in enumerate(self.folds):
+                held = folds == k
+                out[s][held] = residual[s][held]
+        full.fold_theta = fold_theta
+        return out, fold_theta
+
+
+def out_of_fold_residuals(data: FlightData, effects: list[Effect], fold_theta: list[np.ndarray],
+                          nominal_residual: list[np.ndarray]) -> list[np.ndarray]:
+    """Residual at every sample, each fold's samples against the effects fitted without that fold."""
+    out = [r.copy() for r in nominal_residual]
+    for seg_index, seg in enumerate(data.segments):
+        index = 0
+        for effect in effects:
+            size = effect.param_size
+            model = AeroModel([effect])
+            if not effect.applies_to(seg.scene.structure):
+                index += size
+                continue
+            evaluator = seg.evaluator(model, data.rotor_positions_body)
+            theta = np.stack([fold_theta[k][index:index + size] for k in seg.fold]) if fold_theta else \
+                effect.param_vector()
+            out[seg_index] -= seg.smooth_force(evaluator.force(seg.states, theta))
+            index += size
+    return out
