@@ -15,14 +15,16 @@ paper's flights went on after contacts. Every policy flies the same seeds.
 
 Policies are given as a mapping name -> factory. A factory is called once per
 scenario as ``factory(env)`` or, if it takes two parameters, ``factory(env,
-scenario)``, so that it can read the scenario's suction parameters (SC-MPC is told
-the true k_s and d_thr, as in the paper's simulation). :func:`paper_policies`
+scenario)`` when it has two positional parameters, so that it can read the
+scenario's suction parameters (SC-MPC is told the true k_s and d_thr, as in the
+paper's simulation). :func:`paper_policies`
 gives PID, MPC and SC-MPC; other policies (e.g. a trained PPO agent from
 ``agents``) are added by passing more entries, without touching this module.
 """
 
 from __future__ import annotations
 
+import functools
 import inspect
 import json
 import math
@@ -31,9 +33,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from controllers.evaluation import EvaluationResult, evaluate
+from controllers.mpc.cost import MPCWeights
 from controllers.mpc.policy import MPC, SCMPC
 from controllers.pid import PID
 
@@ -89,17 +90,24 @@ def _pid(env):
     return PID.from_env(env)
 
 
-def _mpc(env):
-    return MPC.from_env(env)
+def _mpc(env, *, weights: MPCWeights | None = None):
+    return MPC.from_env(env, weights=weights)
 
 
-def _scmpc(env, scenario: Scenario):
-    return SCMPC.from_env(env, k_s=scenario.k_s, d_thr=scenario.d_thr)
+def _scmpc(env, scenario: Scenario, *, weights: MPCWeights | None = None):
+    return SCMPC.from_env(env, k_s=scenario.k_s, d_thr=scenario.d_thr, weights=weights)
 
 
-def paper_policies() -> dict[str, PolicyFactory]:
-    """PID, MPC and SC-MPC (told the scenario's true suction parameters)."""
-    return {"PID": _pid, "MPC": _mpc, "SC-MPC": _scmpc}
+def paper_policies(mpc_weights: MPCWeights | None = None) -> dict[str, PolicyFactory]:
+    """PID, MPC and SC-MPC (told the scenario's true suction parameters).
+
+    ``mpc_weights`` replaces the authors' sigmas in both MPCs (for sensitivity
+    studies; the paper's tables use the default ``None``).
+    """
+    if mpc_weights is None:
+        return {"PID": _pid, "MPC": _mpc, "SC-MPC": _scmpc}
+    return {"PID": _pid, "MPC": functools.partial(_mpc, weights=mpc_weights),
+            "SC-MPC": functools.partial(_scmpc, weights=mpc_weights)}
 
 
 def _call_factory(factory: PolicyFactory, env, scenario: Scenario):
@@ -151,9 +159,9 @@ def _collisions(m: dict[str, Any]) -> str:
     return f"{m['collisions']} ({m['collision_episodes']}/{m['episodes']})"
 
 
-def markdown_tables(results: Sequence[ScenarioResult]) -> str:
-    """Markdown of Table I and/or Table II with the paper's figures beside ours."""
-    out = []
+def markdown_tables(results: Sequence[ScenarioResult], note: str = "") -> str:
+    """Markdown of Table I and/or Table II with the paper's figures beside ours (``note`` goes first)."""
+    out = [note + "\n"] if note else []
     table_i = [r for r in results if r.scenario.table == "I"]
     table_ii = [r for r in results if r.scenario.table == "II"]
     if table_i:
@@ -290,16 +298,19 @@ def _plot_table_ii(results: Sequence[ScenarioResult], path: Path, seed_index: in
     plt.close(fig)
 
 
-def write_outputs(results: Sequence[ScenarioResult], out_dir: str | Path) -> dict[str, Path]:
-    """Write ``tables.md``, ``results.json`` and the figures to ``out_dir``; return their paths."""
+def write_outputs(results: Sequence[ScenarioResult], out_dir: str | Path, note: str = "") -> dict[str, Path]:
+    """Write ``tables.md``, ``results.json`` and the figures to ``out_dir``; return their paths.
+
+    ``note`` heads the Markdown and is stored in the JSON (e.g. non-default MPC weights).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"markdown": out / "tables.md", "json": out / "results.json"}
-    paths["markdown"].write_text(markdown_tables(results))
-    paths["json"].write_text(json.dumps(results_json(results), indent=2, default=float))
+    paths["markdown"].write_text(markdown_tables(results, note))
+    paths["json"].write_text(json.dumps({"note": note, **results_json(results)}, indent=2, default=float))
     table_i = [r for r in results if r.scenario.table == "I"]
     table_ii = [r for r in results if r.scenario.table == "II"]
     if table_i:

@@ -160,6 +160,19 @@ def test_compare_command_writes_its_outputs(tmp_path, capsys):
                                                    "table_ii_sweep.png"}
     with pytest.raises(SystemExit):
         cli_main(["compare", "--seeds-ii", "0"])
+    with pytest.raises(SystemExit, match="mpc-sigma"):
+        cli_main(["compare", "--mpc-sigma", "stiffness=3"])
+    with pytest.raises(SystemExit, match="weights.position"):
+        cli_main(["compare", "--mpc-sigma", "position=-1"])
+
+
+def test_compare_with_other_mpc_sigmas_says_so(tmp_path, capsys):
+    code = cli_main(["compare", "--out", str(tmp_path), "--tables", "II", "--seeds-ii", "1", "--duration", "0.2",
+                     "--no-progress", "--mpc-sigma", "position=0.07/0.07/0.093", "--mpc-sigma", "terminal_position=0.02"])
+    assert code == 0
+    text = (tmp_path / "tables.md").read_text()
+    assert text.startswith("**Not the authors' MPC weights**") and "position = (0.07, 0.07, 0.093)" in text
+    assert "terminal_position = 0.02" in capsys.readouterr().out
 
 
 def test_bench_mpc_command_reports_and_checks(tmp_path, capsys):

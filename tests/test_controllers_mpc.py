@@ -162,6 +162,16 @@ def test_sc_mpc_compensates_the_suction_that_pulls_nominal_mpc_into_the_wall():
     assert compensated["wall_normal_rmse"] < 0.55 * nominal["wall_normal_rmse"]
 
 
+def test_suction_is_compensated_only_with_the_force_at_the_predicted_states():
+    # noise-free sweep, 1.9 cm closest duct clearance: the design choice of controllers.mpc.reference
+    kwargs = {"k_s": 4.1, "d_thr": 0.132, "noise": False, "terminate_on_collision": False}
+    default = evaluate(SCMPC.from_env, "WallInspector/WallSweep-v0", [0], kwargs).metrics()
+    on_reference = evaluate(lambda env: SCMPC.from_env(env, force_at_prediction=False),
+                            "WallInspector/WallSweep-v0", [0], kwargs).metrics()
+    assert default["collisions"] == 0 and default["wall_normal_rmse"] < 0.012
+    assert on_reference["collisions"] > 100 and on_reference["wall_normal_rmse"] > 0.04
+
+
 def test_episode_start_clears_the_warm_start(sweep_env):
     policy = SCMPC.from_env(sweep_env)
     obs, _ = sweep_env.reset(seed=0)

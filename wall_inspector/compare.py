@@ -24,7 +24,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds-ii", type=int, default=10, help="seeds of Table II (default 10)")
     parser.add_argument("--duration", type=float, default=None,
                         help="shorten every flight to this many seconds (a quick look; not the paper's tables)")
+    parser.add_argument("--mpc-sigma", action="append", default=[], metavar="NAME=V[/V...]",
+                        help="replace one of the MPCs' sigmas (both MPC and SC-MPC), e.g. position=0.07/0.07/0.093; "
+                             "names are the fields of controllers.mpc.MPCWeights (sensitivity studies, not the paper)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+def _weights(items: list[str]):
+    """MPC weights with the ``--mpc-sigma`` replacements, and a note saying so (``None, ""`` if none)."""
+    from controllers.mpc.cost import MPCWeights
+
+    if not items:
+        return None, ""
+    fields = {f.name for f in dataclasses.fields(MPCWeights)}
+    changes = {}
+    for item in items:
+        name, sep, values = item.partition("=")
+        if not sep or name not in fields:
+            raise SystemExit(f"--mpc-sigma takes NAME=V[/V...] with NAME one of {sorted(fields)}, got {item!r}")
+        try:
+            numbers = [float(v) for v in values.split("/")]
+        except ValueError:
+            raise SystemExit(f"--mpc-sigma {name}: values must be numbers, got {values!r}") from None
+        changes[name] = numbers[0] if len(numbers) == 1 else tuple(numbers)
+    try:
+        weights = MPCWeights(**changes)
+    except ValueError as exc:
+        raise SystemExit(f"--mpc-sigma: {exc}") from None
+    note = ("**Not the authors' MPC weights**: sigmas changed to "
+            + ", ".join(f"{k} = {v}" for k, v in changes.items()) + " (sensitivity study).")
+    return weights, note
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,10 +72,11 @@ def run(args: argparse.Namespace) -> int:
         scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_i)), env_kwargs=extra) for s in pt.TABLE_I]
     if args.tables in ("II", "both"):
         scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_ii)), env_kwargs=extra) for s in pt.TABLE_II]
+    weights, note = _weights(args.mpc_sigma)
     t0 = time.perf_counter()
-    results = pt.run_scenarios(scenarios, pt.paper_policies(), progress=not args.no_progress)
-    paths = pt.write_outputs(results, args.out)
-    print(pt.markdown_tables(results))
+    results = pt.run_scenarios(scenarios, pt.paper_policies(weights), progress=not args.no_progress)
+    paths = pt.write_outputs(results, args.out, note)
+    print(pt.markdown_tables(results, note))
     print("Acceptance (issue 3):")
     for check in pt.acceptance(results):
         print(f"  [{'PASS' if check['pass'] else 'FAIL'}] {check['check']}: {check['value']:.3g}")

@@ -4,10 +4,14 @@ The decision variables are the inputs ``u_0 .. u_{N-1}`` (collective thrust T in
 body rates in rad/s) and the states ``x_1 .. x_N = (p_world, R_body_to_world,
 v_world)`` on their manifold; ``x_0`` is the measured state (Eq. 12's constraint
 ``x_0 = x_init``). They are grouped in blocks ``(u_k, x_{k+1})``
-(:mod:`controllers.mpc.manifold`), and the cost is a sum over stages
-``k = 0 .. N-1`` of squared weighted residuals, each stage touching only its own
-block and the previous one (block ``k - 1`` = ``(u_{k-1}, x_k)``; for ``k = 0`` the
-fixed ``(-, x_init)``, whose input slot no residual reads), which makes the normal equations block-tridiagonal:
+(:mod:`controllers.mpc.manifold`). The authors' release keeps ``x_0`` as a variable
+with a prior of sigma 0.001; the paper's Eq. 12 fixes it, which is done here (a
+prior that tight would move ``x_0`` by tens of micrometres and only add variables).
+
+The cost is a sum over stages ``k = 0 .. N-1`` of squared weighted residuals, each
+stage touching only its own block and the previous one (block ``k - 1`` =
+``(u_{k-1}, x_k)``; for ``k = 0`` the fixed ``(-, x_init)``, whose input slot no
+residual reads), which makes the normal equations block-tridiagonal:
 
 ==========  =====  ===============================================================
 block       rows   residual (each multiplied by 1 / sigma)

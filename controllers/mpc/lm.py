@@ -233,7 +233,9 @@ class LMSettings:
     """Iteration limits and tolerances of :class:`LevenbergMarquardt`.
 
     ``max_iterations`` bounds a warm-started solve; ``max_iterations_cold`` one without
-    a previous solution. A solve stops early when an accepted step lowers the cost by
+    a previous solution (the authors' release allows 10 iterations and never warm
+    starts; from the shifted previous solution 3 iterations are typical, and the
+    benchmark's cost gap to IPOPT shows that 4 are enough). A solve stops early when an accepted step lowers the cost by
     less than ``relative_tolerance`` of it, or the largest step entry falls below
     ``step_tolerance``.
     """

@@ -2,11 +2,12 @@
 
 Each control step, for each env of the batch:
 
-1. the reference states of the horizon (:mod:`controllers.mpc.reference`) from the
-   observation's time and reference position;
-2. the initial guess: the previous solution shifted by one step (its last block
+1. the initial guess: the previous solution shifted by one step (its last block
    repeated), or, at an episode start, the reference states with the flatness
    thrust and zero body rates (a *cold* start, given more iterations);
+2. the reference states of the horizon (:mod:`controllers.mpc.reference`) from the
+   observation's time and reference position, the attitude reference including the
+   model's force at the states the warm start predicts;
 3. Levenberg-Marquardt on the paper's least-squares problem
    (:mod:`controllers.mpc.cost`, :mod:`controllers.mpc.lm`) from the measured state
    ``x_0 = (p_world, R_body_to_world, v_world)``;
@@ -20,8 +21,10 @@ file (:class:`wall_env.model_file.FlightModel`). Neither reads the simulator's o
 effect settings.
 
 Timing: :attr:`MPC.solve_times` lists the seconds each optimisation took (LM
-only), :attr:`MPC.step_times` the seconds of the whole controller step (reference,
-warm start and LM), :attr:`MPC.iteration_counts` the LM iterations;
+only, wall clock), :attr:`MPC.solve_cpu_times` the same in CPU time of the calling
+thread (blind to other processes taking the core), :attr:`MPC.step_times` the
+seconds of the whole controller step (reference, warm start and LM),
+:attr:`MPC.iteration_counts` the LM iterations;
 :meth:`MPC.clear_statistics` empties them. :attr:`MPC.last_solves` keeps, per batch
 index, the data of the latest solve (:class:`SolveRecord`), so a benchmark can hand
 the very same problem to another solver.
@@ -90,6 +93,9 @@ class MPC(ControllerPolicy):
     max_tilt_deg: tilt limit of the flatness attitude reference.
     model_attitude: attitude reference from flatness with the model's force (default;
         see :mod:`controllers.mpc.reference`), or from kinematics alone.
+    force_at_prediction: take that force at the warm start's predicted states (default)
+        rather than on the reference. The two switches exist to measure what they are
+        worth; the defaults are what makes SC-MPC compensate (measured there).
     """
 
     name = "MPC"
@@ -113,6 +119,7 @@ class MPC(ControllerPolicy):
         self.global_params = self.problem.global_params()
         self.shift = max(1, int(round(self.control_dt / self.problem.dt)))
         self.solve_times: list[float] = []
+        self.solve_cpu_times: list[float] = []
         self.step_times: list[float] = []
         self.iteration_counts: list[int] = []
         self.last_solves: list[SolveRecord | None] = []
@@ -125,6 +132,7 @@ class MPC(ControllerPolicy):
     # ------------------------------------------------------------------ statistics
     def clear_statistics(self) -> None:
         self.solve_times.clear()
+        self.solve_cpu_times.clear()
         self.step_times.clear()
         self.iteration_counts.clear()
 
@@ -167,15 +175,16 @@ class MPC(ControllerPolicy):
         S = self.problem.stage_params(refs.p_world, refs.v_world, refs.R_body_to_world)
         Z0 = self.initial_guess(refs) if cold else Z_warm
         start = pack_point(np.zeros(4), p, R, v)  # its input slot is unused: no rate residual at stage 0
-        t_solve = time.perf_counter()
+        t_solve, cpu_solve = time.perf_counter(), time.thread_time()
         result = self.solver.solve(Z0, start, S, self.global_params, cold=cold)
-        t_end = time.perf_counter()
+        t_end, cpu_end = time.perf_counter(), time.thread_time()
         if not (np.all(np.isfinite(result.Z)) and math.isfinite(result.cost)):
             raise SolverFailure(f"non-finite MPC solution (cost {result.cost})")
         memory["Z"] = result.Z
         command = result.Z[PointIndex.u, 0].copy()
         self.last_solves[index] = SolveRecord(Z0, start, S, self.global_params, cold, result)
         self.solve_times.append(t_end - t_solve)
+        self.solve_cpu_times.append(cpu_end - cpu_solve)
         self.step_times.append(t_end - t_start)
         self.iteration_counts.append(result.iterations)
         return command
