@@ -33,11 +33,12 @@ import numpy as np
 
 from controllers.env_description import EnvDescription, describe_env
 from controllers.flatness import attitude_error, level_attitude
-from wall_env.observation import OBSERVATION_SIZE, parse_observation
+from wall_env.observation import OBSERVATION_FIELDS, OBSERVATION_SIZE, parse_observation
 from wall_env.vehicle import GRAVITY
 
 __all__ = ["ControllerPolicy", "SolverFailure", "hover_command", "LEVELLING_GAIN"]
 
+_TIME_INDEX = OBSERVATION_FIELDS["time"].start
 LEVELLING_GAIN = np.array([6.0, 6.0, 4.0])  # 1/s, attitude gain of the hover fallback (the PID's)
 
 
@@ -98,7 +99,7 @@ class ControllerPolicy(ABC):
         self._before_batch(n)
         actions = np.empty((n, 4), dtype=np.float32)
         for i in range(n):
-            t = batch[i, -1]
+            t = batch[i, _TIME_INDEX]
             if starts[i] or self._memory[i] is None or (np.isfinite(t) and t < self._last_time[i]):
                 self._memory[i] = self._new_memory()
             if np.isfinite(t):

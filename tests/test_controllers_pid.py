@@ -119,6 +119,16 @@ def test_description_reads_only_public_attributes():
         describe_env(types.SimpleNamespace(vehicle=base.vehicle))
 
 
+def test_from_env_accepts_a_gymnasium_vector_env():
+    envs = gym.vector.SyncVectorEnv([lambda: gym.make("WallInspector/WallHover-v0") for _ in range(2)])
+    observations, _ = envs.reset(seed=0)
+    pid = PID.from_env(envs)
+    assert pid.description.reference == envs.get_attr("reference")[0]
+    actions, _ = pid.predict(observations, episode_start=np.ones(2, bool))
+    assert actions.shape == (2, 4) and np.all(np.abs(actions) <= 1.0)
+    envs.close()
+
+
 def test_flatness_attitude_and_feedforward():
     R, z = attitude_from_thrust(np.array([[0.0, 0.0, 9.81], [3.0, 0.0, 9.81], [0.0, 0.0, -1.0]]), math.pi / 2)
     np.testing.assert_allclose(R[0], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-12)  # yaw 90 deg, level
