@@ -2,6 +2,12 @@
 
 Quaternions are ``[w, x, y, z]`` (scalar first, Hamilton convention) and rotate body
 vectors into the world frame. Numeric code uses :mod:`scipy.spatial.transform`.
+
+``so3_exp`` and ``so3_log`` are smooth to every order the solvers need, also at the
+identity, where the textbook ``acos`` form of Log has an infinite derivative:
+``Log R = f(c) vee(R - R^T) / 2`` with ``c = (tr R - 1) / 2`` and
+``f(c) = theta / sin(theta)`` evaluated by its series in ``1 - c`` near the identity.
+Log is valid for rotations below about 170 deg.
 """
 
 from __future__ import annotations
@@ -9,15 +15,6 @@ from __future__ import annotations
 import casadi as ca
 
 __all__ = ["quat_to_rotation", "quat_multiply", "skew", "so3_exp", "so3_log"]
-
-
-def skew(w: ca.SX) -> ca.SX:
-    """Matrix ``[w]x`` with ``[w]x v = w x v``."""
-    return ca.vertcat(
-        ca.horzcat(0, -w[2], w[1]),
-        ca.horzcat(w[2], 0, -w[0]),
-        ca.horzcat(-w[1], w[0], 0),
-    )
 
 
 def quat_to_rotation(q: ca.SX) -> ca.SX:
@@ -40,22 +37,45 @@ def quat_multiply(a: ca.SX, b: ca.SX) -> ca.SX:
     )
 
 
-def so3_exp(phi: ca.SX) -> ca.SX:
-    """Rotation matrix of a rotation vector (Rodrigues), smooth through zero."""
-    theta2 = ca.dot(phi, phi)
-    small = theta2 < 1e-8
-    theta = ca.sqrt(theta2 + 1e-300)
-    a = ca.if_else(small, 1 - theta2 / 6, ca.sin(theta) / theta)
-    b = ca.if_else(small, 0.5 - theta2 / 24, (1 - ca.cos(theta)) / (theta2 + 1e-300))
+def skew(w):
+    """``[w]x`` with ``[w]x v = w x v``."""
+    return ca.vertcat(
+        ca.horzcat(0, -w[2], w[1]),
+        ca.horzcat(w[2], 0, -w[0]),
+        ca.horzcat(-w[1], w[0], 0),
+    )
+
+
+def _vee_antisymmetric(M):
+    return ca.vertcat(M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]) / 2
+
+
+# Near the identity, theta / sin(theta) as a series in e = 1 - cos(theta):
+# 1 + e/3 + 2 e^2/15 + 2 e^3/35 + 8 e^4/315 (next term below 1e-15 for e < 1e-3).
+_SERIES_LIMIT = 1e-3
+
+
+def so3_log(R):
+    """Rotation vector of ``R`` (also of a nearly orthonormal matrix), smooth through the identity."""
+    c = (R[0, 0] + R[1, 1] + R[2, 2] - 1) / 2
+    e = 1 - c
+    series = 1 + e * (1 / 3 + e * (2 / 15 + e * (2 / 35 + e * 8 / 315)))
+    # the closed form is only selected for c <= 1 - _SERIES_LIMIT; its argument is clamped
+    # well inside that (so acos and sqrt stay smooth where it is not selected, and the
+    # clamp's kink never coincides with the switch, where it would halve the derivative)
+    c_far = ca.fmax(ca.fmin(c, 1 - _SERIES_LIMIT / 2), -1 + 1e-9)
+    closed = ca.acos(c_far) / ca.sqrt(1 - c_far**2)
+    factor = ca.if_else(e < _SERIES_LIMIT, series, closed)
+    return factor * _vee_antisymmetric(R)
+
+
+def so3_exp(phi):
+    """``Exp(phi)`` by Rodrigues' formula with series coefficients near zero (smooth everywhere)."""
+    t2 = ca.dot(phi, phi)
+    small = t2 < 1e-6
+    t2_far = ca.fmax(t2, 0.5e-6)  # clamp kink away from the switch (see so3_log)
+    t = ca.sqrt(t2_far)
+    a = ca.if_else(small, 1 - t2 / 6 + t2**2 / 120, ca.sin(t) / t)
+    b = ca.if_else(small, 0.5 - t2 / 24 + t2**2 / 720, (1 - ca.cos(t)) / t2_far)
     K = skew(phi)
-    return ca.SX.eye(3) + a * K + b * (K @ K)
-
-
-def so3_log(R: ca.SX) -> ca.SX:
-    """Rotation vector of a rotation matrix (valid for angles below pi)."""
-    cos_theta = ca.fmin(ca.fmax((ca.trace(R) - 1) / 2, -1 + 1e-12), 1.0)
-    theta = ca.acos(cos_theta)
-    sin_theta = ca.sin(theta)
-    small = theta < 1e-4
-    factor = ca.if_else(small, 0.5 + theta**2 / 12, theta / (2 * sin_theta + 1e-300))
-    return factor * ca.vertcat(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
+    return ca.DM.eye(3) + a * K + b * (K @ K)

@@ -3,7 +3,7 @@
 =====================  ==========================================================
 module                 what
 =====================  ==========================================================
-``manifold``           block layout, boxplus/boxminus, smooth SO(3) Log/Exp (CasADi)
+``manifold``           block layout, boxplus/boxminus (CasADi)
 ``cost``               residual blocks, weights (sigmas), limits, the model's force
 ``lm``                 compiled Levenberg-Marquardt with block-tridiagonal solves
 ``ipopt_reference``    the same problem solved by CasADi + IPOPT (tests, benchmark)

@@ -54,7 +54,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from controllers.mpc.manifold import POINT_SIZE, so3_log_smooth, unpack_point
+from controllers.mpc.manifold import POINT_SIZE, unpack_point
+from wall_env.rotations import so3_log
 from wall_env.aero import AeroModel, symbolic_scene
 from wall_env.effects import FlightContext
 from wall_env.scene import Scene
@@ -236,11 +237,11 @@ class MPCProblem:
         a_k = self.acceleration(p_k, R_k, v_k, u_k, mass, theta, scene)
         r_dyn = ca.vertcat(
             p_n - p_k - dt * v_k - 0.5 * dt**2 * a_k,
-            so3_log_smooth(R_k.T @ R_n) - dt * u_k[1:4],
+            so3_log(R_k.T @ R_n) - dt * u_k[1:4],
             v_n - v_k - dt * a_k,
         )
         R_ref = ca.reshape(s[StageParamIndex.R_ref], 3, 3)
-        r_ref = ca.vertcat(p_n - s[StageParamIndex.p_ref], so3_log_smooth(R_n.T @ R_ref), v_n - s[StageParamIndex.v_ref])
+        r_ref = ca.vertcat(p_n - s[StageParamIndex.p_ref], so3_log(R_n.T @ R_ref), v_n - s[StageParamIndex.v_ref])
         r_term = s[StageParamIndex.terminal] * (p_n - s[StageParamIndex.p_ref])
         r_rate = s[StageParamIndex.rate] * (u_prev - u_k)
         r_lim = ca.fmax(u_k - u_high, 0) + ca.fmax(u_low - u_k, 0)
