@@ -17,7 +17,8 @@ windows is ``prediction_rms_m``.
 Windows start every ``stride_s`` seconds and are evaluated with the model fitted
 without the cross-validation fold of their start sample; a window that would leave
 its fold's time block is not used, so every prediction is of data the model was
-not fitted to. The start velocity and position are the smoothed log values.
+not fitted to. The start position and velocity are the logged ones smoothed over 0.5 s
+(the 1 s window of the force residual would lag where the acceleration changes).
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ from discovery.aero_eval import SampleStates
 from discovery.residuals import FlightData, Segment
 from wall_env.aero import AeroModel
 
-__all__ = ["PredictionWindows", "windows", "predict", "prediction_errors", "DEFAULT_HORIZON_S", "DEFAULT_STRIDE_S"]
+__all__ = ["PredictionWindows", "windows", "predict", "prediction_pairs", "prediction_errors", "DEFAULT_HORIZON_S",
+           "DEFAULT_STRIDE_S"]
 
 DEFAULT_HORIZON_S = 0.5
 DEFAULT_STRIDE_S = 0.1
@@ -75,8 +77,8 @@ def predict(seg: Segment, starts: np.ndarray, steps: int, model: AeroModel, roto
     evaluator = seg.evaluator(model, rotor_positions_body) if model.effects else None
     m = seg.states.mass
     g = np.array([0.0, 0.0, seg.gravity])
-    p = seg.states.p_world[starts].copy()
-    v = seg.states.v_world[starts].copy()
+    p = seg.p_start[starts].copy()
+    v = seg.v_start[starts].copy()
     R_all, w_all, f_all = seg.states.R_body_to_world, seg.states.omega_body, seg.states.rotor_thrusts
     for j in range(steps):
         k = starts + j
@@ -92,20 +94,31 @@ def predict(seg: Segment, starts: np.ndarray, steps: int, model: AeroModel, roto
     return p
 
 
-def prediction_errors(data: FlightData, model: AeroModel, fold_theta: list[np.ndarray] | None = None,
-                      horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S) -> np.ndarray:
-    """Position errors (m) at the horizon of every held-out window.
+def prediction_pairs(data: FlightData, model: AeroModel, fold_theta: list[np.ndarray] | None = None,
+                     horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Start, predicted and logged positions ``(w, 3)`` at the horizon of every held-out window.
 
     ``model`` gives the structure; ``fold_theta[k]`` its parameters fitted without fold
     ``k`` (default: the model's own parameters for every fold).
     """
-    errors = []
+    starts, predicted, measured = [], [], []
     for w in windows(data, horizon_s, stride_s):
         seg = data.segments[w.segment]
         theta = None
-        if fold_theta is not None:
-            theta = np.stack([fold_theta[k] for k in w.fold]) if model.param_size else None
-        predicted = predict(seg, w.starts, w.steps, model, data.rotor_positions_body, theta)
-        measured = seg.p_measured[w.starts + w.steps]
-        errors.append(np.linalg.norm(predicted - measured, axis=1))
-    return np.concatenate(errors) if errors else np.zeros(0)
+        if fold_theta is not None and model.param_size:
+            theta = np.stack([fold_theta[k] for k in w.fold])
+        predicted.append(predict(seg, w.starts, w.steps, model, data.rotor_positions_body, theta))
+        measured.append(seg.p_measured[w.starts + w.steps])
+        starts.append(seg.p_measured[w.starts])
+    if not predicted:
+        empty = np.zeros((0, 3))
+        return empty, empty, empty
+    return np.concatenate(starts), np.concatenate(predicted), np.concatenate(measured)
+
+
+def prediction_errors(data: FlightData, model: AeroModel, fold_theta: list[np.ndarray] | None = None,
+                      horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S) -> np.ndarray:
+    """Position errors (m) at the horizon of every held-out window (see :func:`prediction_pairs`)."""
+    _, predicted, measured = prediction_pairs(data, model, fold_theta, horizon_s, stride_s)
+    return np.linalg.norm(predicted - measured, axis=1)

@@ -42,6 +42,7 @@ __all__ = ["Segment", "FlightData", "prepare", "step_average_samples", "DEFAULT_
 DEFAULT_WINDOW_S = 1.0  # s, smoothing window of the differentiator (both sides of Eq. 28 alike)
 DEFAULT_BLOCK_S = 4.0  # s, length of the time blocks dealt to cross-validation folds
 DEFAULT_FOLDS = 5
+START_WINDOW_S = 0.5  # s, smoothing of the state a prediction starts from
 
 
 def step_average_samples(x: np.ndarray) -> np.ndarray:
@@ -66,6 +67,8 @@ class Segment:
     fold: np.ndarray  # (n,) int, the cross-validation fold each sample is held out in
     train_mask: np.ndarray  # (K, n) bool, samples usable for fitting when fold k is held out
     p_measured: np.ndarray = field(repr=False, default=None)  # (n, 3) logged (unsmoothed) position
+    p_start: np.ndarray = field(repr=False, default=None)  # (n, 3) position for prediction starts (short smoothing)
+    v_start: np.ndarray = field(repr=False, default=None)  # (n, 3) velocity for prediction starts (short smoothing)
     evaluators: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -203,8 +206,11 @@ def prepare(logs: list[FlightLog], *, window_s: float = DEFAULT_WINDOW_S, order:
                                   rotor, m)
             fold, train = _fold_assignment(t, float(log.t[0]), blocks[index], n_folds,
                                            guard_s=0.5 * (kernel.window + 1) * float(np.median(np.diff(t))))
+            # prediction starts need the state at one instant: a short window keeps the lag of a 1 s fit out
+            short = LocalPolynomial(t, min(START_WINDOW_S, window_s), order)
             segments.append(Segment(index, log.source, t, states, thrust, log.omega_cmd_body[part], kernel,
-                                    log.scene, log.gravity, measured, fold, train, log.p_world[part]))
+                                    log.scene, log.gravity, measured, fold, train, log.p_world[part],
+                                    short.smooth(log.p_world[part]), short.smooth(v_raw)))
     if not segments:
         raise ValueError("no log has a segment long enough to differentiate")
     return FlightData(segments, vehicle, n_folds, [log.source for log in logs])

@@ -39,7 +39,7 @@ import numpy as np
 
 from discovery.fitting import out_of_fold_residuals
 from discovery.flight_log import FlightLog
-from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_errors
+from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, prepare
 from discovery.selection import Selection, fit_only, forward_selection
@@ -140,11 +140,12 @@ class Discovery:
         self._say("open-loop predictions")
         self.residual_after_ = data.concat(out_of_fold_residuals(data, chosen.fit.effects, chosen.fit.fold_theta,
                                                                  r_nom))
-        self.prediction_errors_before_ = prediction_errors(data, nominal.aero_model(), None, self.horizon_s,
-                                                           self.stride_s)
+        self.prediction_before_ = prediction_pairs(data, nominal.aero_model(), None, self.horizon_s, self.stride_s)
         fold_models = self._fold_theta(selection)
-        self.prediction_errors_after_ = prediction_errors(data, self.model_.aero_model(), fold_models, self.horizon_s,
-                                                          self.stride_s)
+        self.prediction_after_ = prediction_pairs(data, self.model_.aero_model(), fold_models, self.horizon_s,
+                                                  self.stride_s)
+        self.prediction_errors_before_ = np.linalg.norm(self.prediction_before_[1] - self.prediction_before_[2], axis=1)
+        self.prediction_errors_after_ = np.linalg.norm(self.prediction_after_[1] - self.prediction_after_[2], axis=1)
         self.gap_before_ = {"force_rms_N": _rms(self.residual_before_),
                             "prediction_rms_m": _rms(self.prediction_errors_before_)}
         self.gap_after_ = {"force_rms_N": _rms(self.residual_after_),
