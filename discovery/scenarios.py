@@ -98,11 +98,27 @@ def survey_for(env: gym.Env, amplitude=(1.6, 2.1, 0.5), period=(5.0, 6.5, 4.0), 
 
 
 class Retarget(gym.ObservationWrapper):
-    """Fly ``reference`` instead of the env's own: observation reference fields and ``reference`` follow it."""
+    """Fly ``reference`` instead of the env's own: observation reference fields, ``reference`` and the
+    info's ``p_ref`` and ``v_ref`` follow it (so :func:`controllers.evaluation.evaluate` scores against it)."""
 
     def __init__(self, env: gym.Env, reference: Reference):
         super().__init__(env)
         self.reference = reference
+
+    def _info(self, info: dict) -> dict:
+        if "time" in info:
+            p_ref, v_ref, _ = self.reference.sample(float(info["time"]))
+            info = dict(info)
+            info["p_ref"], info["v_ref"] = p_ref[0], v_ref[0]
+        return info
+
+    def reset(self, **kwargs):
+        observation, info = super().reset(**kwargs)
+        return observation, self._info(info)
+
+    def step(self, action):
+        observation, reward, terminated, truncated, info = super().step(action)
+        return observation, reward, terminated, truncated, self._info(info)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
         obs = np.array(observation, dtype=np.float64)
@@ -143,9 +159,9 @@ SCENARIOS: dict[str, Scenario] = {
     s.name: s
     for s in (
         Scenario("wall-sweep", "the paper's sweep along the wall (approaching 0.1 m and back) with a PID stiff "
-                 "enough (Kp 20 1/s^2 toward the wall) to fly inside the suction zone",
-                 "WallInspector/WallSweep-v0", {"standoff": 0.28},
-                 policy_kwargs={"kp": [20.0, 20.0, 10.0], "kv": [8.0, 8.0, 6.0]}),
+                 "enough (Kp 30 1/s^2 toward the wall) to fly inside the suction zone",
+                 "WallInspector/WallSweep-v0", {"standoff": 0.26},
+                 policy_kwargs={"kp": [30.0, 30.0, 10.0], "kv": [11.0, 11.0, 6.0]}),
         Scenario("wall-survey", "a slow survey facing the wall, the near rotors 0.08 to 0.18 m from it, with a "
                  "PID stiff enough (Kp 30 1/s^2) to fly inside the suction zone", "WallInspector/WallHover-v0",
                  {"standoff": 0.25, "altitude": 1.0, "max_tracking_error": 100.0},
@@ -154,9 +170,9 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario("floor-to-ceiling", "the sweep from 0.15 m above the ground to 0.17 m under a ceiling, "
                  "0.5 m from the wall", "WallInspector/WallSweep-v0",
                  {"standoff": 0.5, "altitude": 1.15, "ceiling_z": 2.32}),
-        Scenario("survey", "a Lissajous survey 3 m from the wall, up to 3 m/s horizontally and 1.2 m/s vertically",
+        Scenario("survey", "a Lissajous survey 3 m from the wall, up to 3 m/s horizontally and 1.5 m/s vertically",
                  "WallInspector/WallHover-v0", {"standoff": 3.0, "altitude": 2.0, "max_tracking_error": 100.0},
-                 survey={"amplitude": (2.4, 3.1, 0.76), "period": (5.0, 6.5, 4.0)}),
+                 survey={"amplitude": (2.4, 3.1, 0.95), "period": (5.0, 6.5, 4.0)}),
         Scenario("ground-survey", "a slow survey 0.07 to 0.19 m above the ground", "WallInspector/WallHover-v0",
                  {"standoff": 1.5, "altitude": 0.5, "max_tracking_error": 100.0},
                  survey={**_NEAR, "centre": (1.5, 0.0, 0.13)}),

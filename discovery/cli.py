@@ -1,0 +1,121 @@
+"""``wall-inspector discover``: find what the nominal model misses in flight logs, fix the model, prove it.
+
+::
+
+    wall-inspector discover flight.csv [more.csv ...] --out results/ [--json report.json]
+                            [--effect wall_suction] [--closed-loop]
+
+Writes into ``--out``: ``model.json`` (the nominal vehicle plus the named effects with
+fitted parameters and standard errors; ``gym.make(..., model="model.json")`` and
+``SCMPC.from_env(env, model="model.json")`` load it), ``report.json`` (see
+:mod:`discovery.report`; also copied to ``--json``) and the figures of
+:mod:`discovery.plots`. The logs are only read. ``--effect NAME`` fits only that effect
+(the paper's identification of Sec. 3.4 for ``wall_suction``). ``--closed-loop`` also
+flies nominal MPC and SC-MPC from the discovered model in the log's world
+(:mod:`discovery.closed_loop`); the world comes from ``--scenario`` or the
+``<log>.scenario.json`` that ``wall-inspector fly`` writes.
+
+Exit status 0 on success, 2 when a log or an argument is unusable (the message names
+the file, column or key, and row).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from discovery.flight_log import LogFormatError, read_log, sidecar_path
+from discovery.fly import scenario_path
+from wall_env.effects import EFFECTS
+
+__all__ = ["add_arguments", "run", "OUTPUT_FILES"]
+
+OUTPUT_FILES = ("model.json", "report.json", "residual_vs_regressor.png", "residual_time.png", "prediction.png")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("logs", nargs="+", metavar="LOG.csv", help="flight logs (each with its .json sidecar)")
+    parser.add_argument("--out", required=True, help="folder for model.json, report.json and the figures")
+    parser.add_argument("--json", default=None, help="also write the report to this file")
+    parser.add_argument("--effect", choices=sorted(EFFECTS), default=None,
+                        help="fit only this effect (the paper's identification for wall_suction)")
+    parser.add_argument("--candidates", default=None,
+                        help=f"comma-separated effects to consider (default all: {','.join(EFFECTS)})")
+    parser.add_argument("--window", type=float, default=None, help="smoothing window of the differentiator (s)")
+    parser.add_argument("--horizon", type=float, default=None, help="open-loop prediction horizon (s, default 0.5)")
+    parser.add_argument("--no-plots", action="store_true", help="skip the figures")
+    parser.add_argument("--closed-loop", action="store_true",
+                        help="also fly nominal MPC and SC-MPC from the discovered model in the log's world")
+    parser.add_argument("--scenario", default=None,
+                        help="scenario file for --closed-loop (default: <first log>.scenario.json written by fly)")
+    parser.add_argument("--closed-loop-seeds", type=int, default=1, help="episodes per controller (seeds 0..N-1)")
+    parser.add_argument("--closed-loop-duration", type=float, default=None, help="closed-loop flight length (s)")
+    parser.add_argument("--quiet", action="store_true", help="print only the summary")
+
+
+def _fail(message: str) -> int:
+    print(f"discover: {message}", file=sys.stderr)
+    return 2
+
+
+def run(args: argparse.Namespace) -> int:
+    from discovery.report import build_report, format_summary, write_report
+    from discovery.workflow import Discovery
+
+    started = time.perf_counter()
+    out = Path(args.out)
+    inputs = []
+    for name in args.logs:
+        path = Path(name)
+        inputs += [path, sidecar_path(path), scenario_path(path)]
+    outputs = [out / f for f in OUTPUT_FILES] + ([Path(args.json)] if args.json else [])
+    resolved_inputs = {p.resolve() for p in inputs if p.exists()}
+    clashes = [str(p) for p in outputs if p.resolve() in resolved_inputs]
+    if clashes:
+        return _fail(f"output file(s) {clashes} would overwrite an input; choose another --out or --json")
+    try:
+        logs = [read_log(name) for name in args.logs]
+    except (LogFormatError, FileNotFoundError) as exc:
+        return _fail(str(exc))
+    candidates = None
+    if args.candidates:
+        candidates = [c.strip() for c in args.candidates.split(",") if c.strip()]
+    settings = {}
+    if args.window is not None:
+        settings["window_s"] = args.window
+    if args.horizon is not None:
+        settings["horizon_s"] = args.horizon
+    say = None if args.quiet else (lambda text: print(f"  {text}", file=sys.stderr))
+    try:
+        found = Discovery(candidates, args.effect, progress=say, **settings).fit(logs)
+    except ValueError as exc:
+        return _fail(str(exc))
+    out.mkdir(parents=True, exist_ok=True)
+    model_path = out / "model.json"
+    found.model_.save(model_path)
+    closed_loop = None
+    if args.closed_loop:
+        from discovery.closed_loop import closed_loop_check, load_scenario
+
+        scenario_file = Path(args.scenario) if args.scenario else scenario_path(args.logs[0])
+        if not scenario_file.exists():
+            return _fail(f"--closed-loop needs the log's world: {scenario_file} does not exist "
+                         "(fly writes it beside the log; or pass --scenario)")
+        if say:
+            say(f"closed-loop check in {scenario_file}")
+        closed_loop = closed_loop_check(model_path, load_scenario(scenario_file),
+                                        seeds=range(args.closed_loop_seeds), duration=args.closed_loop_duration)
+    if not args.no_plots:
+        from discovery.plots import plot_all
+
+        plot_all(found, out)
+    report = build_report(found, str(model_path), closed_loop)
+    report["details"]["command_runtime_s"] = round(time.perf_counter() - started, 3)
+    write_report(report, out / "report.json")
+    if args.json:
+        write_report(report, args.json)
+    print(format_summary(report))
+    print(f"wrote {out / 'report.json'}" + (f" and {args.json}" if args.json else ""))
+    return 0

@@ -1,0 +1,131 @@
+"""Pictures of the proof: the residual against the regressor that localises it, before and after, and
+open-loop predictions against measurements.
+
+:func:`plot_all` writes, into a folder:
+
+``residual_vs_regressor.png``
+    one row per discovered effect (or, if none, the regressor that best localises the
+    residual): the held-out force residual along the effect's direction against that
+    effect's localising regressor, before (nominal model) and after (discovered model),
+    with bin means.
+``residual_time.png``
+    the held-out force residual magnitude against time, before and after.
+``prediction.png``
+    logged against predicted displacement over the prediction horizon, per world axis,
+    for the nominal and the discovered model.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["plot_all"]
+
+
+def _binned(x: np.ndarray, y: np.ndarray, bins: int = 15) -> tuple[np.ndarray, np.ndarray]:
+    finite = np.isfinite(x)
+    x, y = x[finite], y[finite]
+    if x.size < bins:
+        return x, y
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, bins + 1)))
+    index = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+    centres = np.array([x[index == b].mean() for b in range(len(edges) - 1) if np.any(index == b)])
+    means = np.array([y[index == b].mean() for b in range(len(edges) - 1) if np.any(index == b)])
+    return centres, means
+
+
+def _thin(n: int, limit: int = 4000) -> np.ndarray:
+    return np.arange(0, n, max(1, n // limit))
+
+
+def plot_all(found, out_dir: str | Path) -> list[Path]:
+    """Write the figures of a fitted :class:`~discovery.workflow.Discovery` into ``out_dir``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    regs = {r.name: r for r in found.regressors_}
+    before, after = found.residual_before_, found.residual_after_
+    keep = _thin(len(before))
+
+    # ---------------------------------------------------------------- residual vs regressor
+    rows = []
+    for effect in found.effects_:
+        where = found.where_[effect.name]
+        name = where.get("regressor")
+        if name in (None, "everywhere"):
+            name = "time"
+        direction = np.asarray(where.get("direction_world") or (0.0, 0.0, 1.0))
+        rows.append((effect.name, regs.get(name, regs["time"]), direction))
+    if not rows:
+        name = found.where_before_.get("regressor")
+        name = name if name in regs else "time"
+        direction = np.asarray(found.where_before_.get("direction_world") or (0.0, 0.0, 1.0))
+        rows.append(("no effect named", regs[name], direction))
+    fig, axes = plt.subplots(len(rows), 2, figsize=(11, 3.6 * len(rows)), squeeze=False, sharey="row")
+    for (label, reg, direction), (ax_b, ax_a) in zip(rows, axes):
+        x = reg.values
+        for ax, residual, title, colour in ((ax_b, before, "nominal model", "tab:red"),
+                                            (ax_a, after, "discovered model", "tab:blue")):
+            y = residual @ direction
+            ax.plot(x[keep], y[keep], ".", ms=2, alpha=0.3, color=colour)
+            cx, cy = _binned(x, y)
+            ax.plot(cx, cy, "-o", color="k", ms=3, lw=1.2, label="bin means")
+            ax.axhline(0.0, color="grey", lw=0.8)
+            ax.set_xlabel(f"{reg.name} ({reg.unit})")
+            ax.set_title(f"{label}: held-out residual, {title}")
+            ax.legend(loc="best", fontsize=8)
+        ax_b.set_ylabel(f"force residual along [{', '.join(f'{c:.2f}' for c in direction)}] (N)")
+    fig.tight_layout()
+    path = out / "residual_vs_regressor.png"
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    written.append(path)
+
+    # ---------------------------------------------------------------- residual vs time
+    fig, ax = plt.subplots(figsize=(11, 3.5))
+    t = found.data_.times
+    ax.plot(t[keep], np.linalg.norm(before, axis=1)[keep], ".", ms=2, color="tab:red", alpha=0.5,
+            label=f"nominal ({found.gap_before_['force_rms_N']:.3f} N RMS)")
+    ax.plot(t[keep], np.linalg.norm(after, axis=1)[keep], ".", ms=2, color="tab:blue", alpha=0.5,
+            label=f"discovered ({found.gap_after_['force_rms_N']:.3f} N RMS)")
+    ax.set_xlabel("time in log (s)")
+    ax.set_ylabel("|force residual| (N)")
+    ax.set_title("held-out force residual (paper Eq. 28)")
+    ax.legend(loc="upper right")
+    fig.tight_layout()
+    path = out / "residual_time.png"
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    written.append(path)
+
+    # ---------------------------------------------------------------- predicted vs measured
+    fig, axes = plt.subplots(1, 3, figsize=(12, 4))
+    start_b, pred_b, meas_b = found.prediction_before_
+    _, pred_a, _ = found.prediction_after_
+    for axis, ax in enumerate(axes):
+        if len(meas_b) == 0:
+            break
+        measured = meas_b[:, axis] - start_b[:, axis]
+        ax.plot(measured, pred_b[:, axis] - start_b[:, axis], ".", ms=3, color="tab:red", alpha=0.5, label="nominal")
+        ax.plot(measured, pred_a[:, axis] - start_b[:, axis], ".", ms=3, color="tab:blue", alpha=0.5,
+                label="discovered")
+        low, high = float(np.min(measured)), float(np.max(measured))
+        ax.plot([low, high], [low, high], "k-", lw=0.8)
+        ax.set_xlabel(f"logged displacement {'xyz'[axis]} (m)")
+        ax.set_ylabel(f"predicted displacement {'xyz'[axis]} (m)")
+        ax.legend(loc="upper left", fontsize=8)
+    fig.suptitle(f"open-loop predictions over {found.horizon_s:g} s replaying the logged thrust (held-out): "
+                 f"{found.gap_before_['prediction_rms_m'] * 100:.2f} cm -> {found.gap_after_['prediction_rms_m'] * 100:.2f} cm RMS")
+    fig.tight_layout()
+    path = out / "prediction.png"
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    written.append(path)
+    return written
