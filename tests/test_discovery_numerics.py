@@ -1,0 +1,112 @@
+"""Discovery's numerics: the differentiator, the compiled effect forces and Jacobians, and the residual and
+prediction being exact on noise-free simulated flights."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.signal import savgol_filter
+from scipy.spatial.transform import Rotation
+
+from discovery.aero_eval import ForceEvaluator, SampleStates
+from discovery.differentiation import LocalPolynomial
+from discovery.fly import fly
+from discovery.prediction import prediction_errors
+from discovery.residuals import prepare
+from wall_env.aero import AeroModel
+from wall_env.effects import EFFECTS, effects_from_spec, make_effect
+from wall_env.model_file import FlightModel
+from wall_env.scene import Scene, Wall
+from wall_env.vehicle import VehicleParams
+
+
+# ---------------------------------------------------------------------- differentiator
+@pytest.mark.parametrize("rate", [50.0, 100.0, 1000.0])
+def test_local_polynomial_is_scipys_savitzky_golay_on_uniform_samples(rate):
+    t = np.arange(int(6 * rate)) / rate
+    x = np.column_stack([np.sin(2 * t), np.cos(3 * t)]) + np.random.default_rng(0).normal(0, 0.01, (len(t), 2))
+    lp = LocalPolynomial(t, window_s=0.4, order=2)
+    assert lp.uniform and lp.window % 2 == 1
+    np.testing.assert_allclose(lp.smooth(x), savgol_filter(x, lp.window, 2, axis=0, mode="interp"), atol=1e-10)
+    np.testing.assert_allclose(lp.derivative(x), savgol_filter(x, lp.window, 2, deriv=1, delta=1 / rate, axis=0,
+                                                                mode="interp"), atol=1e-8)
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.3])
+def test_matched_kernel_reproduces_the_derivative_and_is_exact_for_quadratics(jitter):
+    rng = np.random.default_rng(1)
+    t = np.arange(400) * 0.01 + rng.uniform(-jitter, jitter, 400) * 0.01
+    t.sort()
+    lp = LocalPolynomial(t, window_s=0.3, order=2)
+    assert lp.uniform == (jitter == 0.0)
+    v = 1.0 + 2.0 * t - 0.7 * t**2
+    np.testing.assert_allclose(lp.derivative(v), 2.0 - 1.4 * t, atol=1e-9)
+    steps = np.diff(v) / np.diff(t)
+    np.testing.assert_allclose(lp.step_average(steps), lp.derivative(v), atol=1e-9)
+    rows = np.arange(0, 400, 7)
+    np.testing.assert_allclose(lp.step_average(steps, rows), lp.step_average(steps)[rows], atol=1e-12)
+
+
+# ---------------------------------------------------------------------- compiled forces
+def _random_states(n: int, seed: int) -> SampleStates:
+    rng = np.random.default_rng(seed)
+    p = np.column_stack([rng.uniform(0.02, 0.4, n), rng.uniform(-1, 1, n), rng.uniform(0.05, 2.9, n)])
+    R = Rotation.from_rotvec(rng.normal(0, 0.3, (n, 3))).as_matrix()
+    return SampleStates(p, R, rng.normal(0, 1.5, (n, 3)), rng.normal(0, 1, (n, 3)), rng.uniform(1, 4, (n, 4)), 1.0)
+
+
+@pytest.mark.parametrize("name", sorted(EFFECTS))
+def test_vectorised_force_and_jacobian_are_the_librarys(name):
+    vehicle = VehicleParams()
+    scene = Scene((Wall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)),), 0.0, 3.0)
+    model = AeroModel([make_effect(name)])
+    evaluator = ForceEvaluator(model, vehicle.rotor_positions_array, scene, 9.81)
+    states = _random_states(1500, 3)  # more than one chunk
+    theta = model.theta()
+    force, jacobian = evaluator.force_and_jacobian(states, theta)
+    reference = model.function(vehicle.rotor_positions_array, scene)
+    for k in (0, 700, 1499):
+        expected = reference(states.p_world[k], states.R_body_to_world[k], states.v_world[k], states.omega_body[k],
+                             states.rotor_thrusts[k], 1.0, theta, scene.to_vector())[0]
+        np.testing.assert_allclose(force[k], np.asarray(expected).ravel(), atol=1e-12)
+    step = 1e-6
+    for i in range(model.param_size):
+        shifted = theta.copy()
+        shifted[i] += step
+        numeric = (evaluator.force(states, shifted) - force) / step
+        # kinks (suction threshold, ground-effect clamp) make a few samples differ; the rest must agree
+        close = np.all(np.abs(numeric - jacobian[:, :, i]) <= 1e-4 + 1e-4 * np.abs(numeric), axis=1)
+        assert close.mean() > 0.98
+
+
+# ---------------------------------------------------------------------- residual and prediction
+@pytest.fixture(scope="module")
+def noise_free_ground_flight():
+    log, summary = fly(None, "pid", "ground_effect:radius=0.08", 3, None, scenario="ground-survey", duration=12.0,
+                       env_kwargs={"noise": False}, noise=None)
+    return log, summary
+
+
+def test_residual_against_the_nominal_model_is_the_missing_force(noise_free_ground_flight):
+    log, summary = noise_free_ground_flight
+    data = prepare([log])
+    seg = data.segments[0]
+    residual = data.residuals(data.nominal_model)[0]
+    # the simulator's ground-effect force, averaged over each control step, smoothed by the same kernel
+    truth = seg.kernel.step_average(summary["effect_forces_world"]["ground_effect"][:-1])
+    assert np.abs(truth).max() > 0.2
+    assert np.abs(residual - truth).max() < 5e-3
+    true_model = FlightModel(log.vehicle.to_vehicle_params(), effects_from_spec("ground_effect:radius=0.08"))
+    assert np.abs(data.residuals(true_model.aero_model())[0]).max() < 5e-3
+
+
+def test_prediction_replaying_the_log_is_exact_with_the_true_model(noise_free_ground_flight):
+    log, _ = noise_free_ground_flight
+    data = prepare([log])
+    true_model = FlightModel(log.vehicle.to_vehicle_params(), effects_from_spec("ground_effect:radius=0.08"))
+    nominal = FlightModel(log.vehicle.to_vehicle_params(), [])
+    exact = prediction_errors(data, true_model.aero_model())
+    off = prediction_errors(data, nominal.aero_model())
+    assert len(exact) > 50
+    assert np.sqrt(np.mean(exact**2)) < 1e-3
+    assert np.sqrt(np.mean(off**2)) > 1e-2
