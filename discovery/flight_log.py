@@ -310,8 +310,8 @@ def _assemble(path: Path, c: dict[str, np.ndarray], vehicle: NominalVehicle, sce
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
         i = int(bad[0]) + 1
-        raise LogFormatError(f"{path}: line {lines[i]} (sample {i + 1}), column 't': time {t[i]!r} s does not "
-                             f"increase (previous sample {t[i - 1]!r} s); time must be strictly increasing")
+        raise LogFormatError(f"{path}: line {lines[i]} (sample {i + 1}), column 't': time {t[i]:.9g} s does not "
+                             f"increase (previous sample {t[i - 1]:.9g} s); time must be strictly increasing")
     rate = 1.0 / float(np.median(dt))
     if not MIN_RATE_HZ * (1 - _RATE_SLACK) <= rate <= MAX_RATE_HZ * (1 + _RATE_SLACK):
         raise LogFormatError(f"{path}: column 't': median sample rate {rate:.1f} Hz is outside the supported "
@@ -329,7 +329,7 @@ def _assemble(path: Path, c: dict[str, np.ndarray], vehicle: NominalVehicle, sce
         i = int(np.flatnonzero(np.any(rotor < 0, axis=1))[0])
         j = int(np.flatnonzero(rotor[i] < 0)[0])
         raise LogFormatError(f"{path}: line {lines[i]} (sample {i + 1}), column '{ROTOR_COLUMNS[j]}': "
-                             f"a rotor thrust cannot be negative ({rotor[i, j]!r} N)")
+                             f"a rotor thrust cannot be negative ({rotor[i, j]:.9g} N)")
     known = set(REQUIRED_COLUMNS) | set(ACCELERATION_COLUMNS) | set(ROTOR_COLUMNS) | {"_line"}
     return FlightLog(
         t=t,
