@@ -109,18 +109,41 @@ def load_policy(source: str | Path, env=None, verify: bool = True):
     return ResidualPolicy(base, policy, residual["scale"], name=f"PPO residual on {residual['base']}")
 
 
-def policy_factory(source: str | Path, verify: bool = True) -> Callable[[Any], Any]:
-    """``env -> policy`` for comparison tables; the checkpoint is read once, on the first call."""
-    cache: dict[str, Any] = {}
+def _env_task(env) -> str:
+    task = getattr(getattr(env, "unwrapped", env), "task", None)
+    if task is None:
+        raise ValueError(f"cannot tell which task {env!r} is; pass the checkpoint to policy_factory explicitly")
+    return task.name
+
+
+def policy_factory(source: str | Path | None = None, *, variant: str = "", verify: bool = True) -> Callable[[Any], Any]:
+    """``env -> policy`` for comparison tables (``controllers.paper_tables``).
+
+    With ``source`` (task name or checkpoint folder) every env gets that checkpoint.
+    Without it, each env gets the shipped agent of its own task,
+    ``agents/pretrained/<task_slug>[_<variant>]/`` (e.g. ``variant="residual_pid"``),
+    so one factory serves Table I (circle) and Table II (sweep)::
+
+        policies = {**paper_policies(), "PPO": agents.policy_factory()}
+
+    Checkpoints are read once per source; a residual agent gets a fresh base controller
+    for every env.
+    """
+    cache: dict[Path, Any] = {}
 
     def factory(env):
-        if "policy" not in cache:
-            loaded = load_policy(source, env=env, verify=verify)
-            cache["policy"] = loaded
-            cache["residual"] = not isinstance(loaded, TrainedPolicy)
-        if cache["residual"]:  # the base controller belongs to this env: build a fresh one
-            return load_policy(source, env=env, verify=False)
-        return cache["policy"]
+        if source is not None:
+            folder = _resolve(source)
+        else:
+            folder = PRETRAINED_DIR / (task_slug(_env_task(env)) + (f"_{variant}" if variant else ""))
+            if not folder.is_dir():
+                raise CheckpointNotFoundError(f"no shipped agent for {_env_task(env)}: {folder} does not exist")
+        if folder not in cache:
+            cache[folder] = load_policy(folder, env=env, verify=verify)
+        loaded = cache[folder]
+        if isinstance(loaded, TrainedPolicy):
+            return loaded
+        return load_policy(folder, env=env, verify=False)  # residual: the base controller belongs to this env
 
-    factory.__name__ = f"ppo_policy_factory({source})"
+    factory.__name__ = f"ppo_policy_factory({source or 'shipped'}{', ' + variant if variant else ''})"
     return factory

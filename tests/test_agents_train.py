@@ -4,6 +4,7 @@ evaluate, resume, and the loaded policy acting exactly like the trained one."""
 from __future__ import annotations
 
 import json
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -149,3 +150,20 @@ def test_ship_puts_the_best_checkpoint_and_card_where_load_policy_finds_them(cli
     best = load_policy(cli_run / "best")
     obs = np.asarray(json.loads((target / "policy.json").read_text())["check"]["observations"], dtype=np.float32)
     np.testing.assert_array_equal(shipped.predict(obs)[0], best.predict(obs)[0])
+
+
+def test_policy_factory_without_source_picks_the_envs_own_task(cli_run, tmp_path, monkeypatch):
+    import shutil
+
+    import agents.policy
+
+    monkeypatch.setattr(agents.policy, "PRETRAINED_DIR", tmp_path)
+    shutil.copytree(cli_run / "best", tmp_path / "wall_hover")
+    factory = policy_factory()
+    env = gym.make("WallInspector/WallHover-v0")
+    assert factory(env).path == tmp_path / "wall_hover"
+    env.close()
+    sweep = gym.make("WallInspector/WallSweep-v0")
+    with pytest.raises(FileNotFoundError, match=re.escape(str(tmp_path / "wall_sweep_residual_pid"))):
+        policy_factory(variant="residual_pid")(sweep)
+    sweep.close()
