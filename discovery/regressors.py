@@ -14,7 +14,7 @@ region (a range of the regressor, the times the flight was there, and the mean
 direction of the residual in the world frame).
 
 :func:`describe_force` says where a fitted effect acts: the samples where its force
-is at least a fifth of its peak, and the regressor that best explains its magnitude
+is at least 5 % of its peak, and the regressor that best explains its magnitude
 with that regressor's range over those samples (e.g. "nearest rotor distance to wall
 0 in [0.06, 0.13] m"), or "everywhere" for a steady force. Among regressors that
 explain equally well (all rotor distances move together), the distance to the
@@ -233,7 +233,7 @@ def describe_force(data: FlightData, force: np.ndarray, candidates: list[Regress
                    min_r2: float = 0.5) -> dict:
     """Where a fitted effect's (smoothed) force ``(N, 3)`` acts and what it depends on.
 
-    The force *acts* where its magnitude is at least a fifth of its peak (98th
+    The force *acts* where its magnitude is at least 5 % of its peak (98th
     percentile). The regressor whose bin means best explain the magnitude (``r2``) is
     reported with its range over the acting samples; ``"everywhere"`` when no regressor
     explains at least ``min_r2`` of the magnitude's variation (a steady force).
@@ -246,7 +246,7 @@ def describe_force(data: FlightData, force: np.ndarray, candidates: list[Regress
     if peak <= 0:
         return {"regressor": None, "unit": None, "range": None, "r2": None, "fraction_of_flight": 0.0,
                 "direction_world": None, "peak_force_N": 0.0, "time_intervals": []}
-    acting = magnitude >= 0.2 * peak
+    acting = magnitude >= 0.05 * peak
     common = {"fraction_of_flight": round(float(acting.mean()), 3), "direction_world": _direction(force, acting),
               "peak_force_N": round(peak, 4), "time_intervals": time_intervals(data, acting)}
     steady = float(np.std(magnitude)) <= 0.05 * float(np.mean(magnitude))

@@ -1,0 +1,185 @@
+"""Issue 5's acceptance: hidden effects named and fitted, clean logs left alone, two effects found together,
+the paper's identification, the closed-loop check, 50 Hz to 1 kHz logs, and the runtime.
+
+Every log here is flown by ``discovery.fly`` (the PID from ``controllers``) with the simulator's
+command noise and the default measurement noise, written to disk and read back; discovery is
+told nothing about what was flown.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+
+from discovery.closed_loop import closed_loop_check, load_scenario
+from discovery.flight_log import read_log, write_log
+from discovery.fly import fly, scenario_path
+from discovery.workflow import Discovery
+from tests.discovery_support import draw_hidden_effect, effect_spec, relative_errors, simulate_1khz_log
+from wall_env.effects import EFFECTS
+from wall_inspector.cli import main
+
+pytestmark = pytest.mark.slow
+
+LOGS_PER_EFFECT = 3  # 7 effects x 3 = 21 hidden-effect logs
+DURATION_S = 30.0
+
+
+# ---------------------------------------------------------------------- hidden single effects
+@pytest.fixture(scope="module")
+def hidden(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("hidden")
+    rng = np.random.default_rng(20251121)
+    rows = []
+    for i in range(LOGS_PER_EFFECT):
+        for j, name in enumerate(EFFECTS):
+            params, flight = draw_hidden_effect(name, rng)
+            path = folder / f"{name}_{i}.csv"
+            _, summary = fly(None, "pid", effect_spec(name, params), 1000 + 10 * i + j, path, duration=DURATION_S,
+                             **flight)
+            assert not summary["terminated"], f"{name} flight ended early"
+            found = Discovery().fit(read_log(path))  # told nothing
+            fitted = found.effects_[0].params_dict() if found.names_ == [name] else None
+            rows.append({
+                "effect": name, "truth": params, "found": found.names_, "fitted": fitted,
+                "worst_param_error": max(relative_errors(fitted, params)) if fitted else None,
+                "force_gap_reduction": 1 - found.gap_after_["force_rms_N"] / found.gap_before_["force_rms_N"],
+                "prediction_gap_reduction": 1 - found.gap_after_["prediction_rms_m"] / found.gap_before_["prediction_rms_m"],
+            })
+    right = [r for r in rows if r["found"] == [r["effect"]]]
+    print("\nhidden single effects:", json.dumps({
+        "logs": len(rows), "named_right": len(right),
+        "worst_param_error": max((r["worst_param_error"] for r in right), default=None),
+        "worst_force_gap_reduction": min(r["force_gap_reduction"] for r in rows),
+        "worst_prediction_gap_reduction": min(r["prediction_gap_reduction"] for r in rows)}))
+    return rows
+
+
+def test_hidden_single_effects_are_named_right_every_time(hidden):
+    assert len(hidden) >= 20
+    wrong = [(r["effect"], r["found"]) for r in hidden if r["found"] != [r["effect"]]]
+    assert not wrong
+
+
+def test_hidden_single_effect_parameters_are_within_10_percent(hidden):
+    errors = {f"{r['effect']} {r['truth']}": r["worst_param_error"] for r in hidden}
+    assert all(e is not None and e <= 0.10 for e in errors.values()), errors
+
+
+def test_hidden_single_effect_gaps_shrink_on_held_out_data(hidden):
+    for r in hidden:
+        assert r["force_gap_reduction"] >= 0.70, r
+        assert r["prediction_gap_reduction"] >= 0.50, r
+
+
+# ---------------------------------------------------------------------- clean logs
+@pytest.mark.parametrize("scenario", ["wall-sweep", "wall-survey", "survey", "ground-survey", "ceiling-survey",
+                                      "floor-to-ceiling"])
+def test_clean_logs_name_no_effect(tmp_path, scenario):
+    path = tmp_path / "clean.csv"
+    fly(None, "pid", "", 7, path, scenario=scenario, duration=DURATION_S)
+    found = Discovery().fit(read_log(path))
+    assert found.names_ == []
+    assert found.unexplained_ is None
+    report = found.report()
+    assert report["effects"] == []
+    assert report["gap_after"] == report["gap_before"]
+
+
+# ---------------------------------------------------------------------- two effects at once
+def test_wall_suction_and_extra_drag_in_one_log_are_both_named(tmp_path):
+    path = tmp_path / "two.csv"
+    fly(None, "pid", "wall_suction:k_s=4.1,d_thr=0.132;linear_drag:D=0.3/0.3/0.3", 21, path, scenario="wall-sweep",
+        duration=DURATION_S)
+    found = Discovery().fit(read_log(path))
+    assert sorted(found.names_) == ["linear_drag", "wall_suction"]
+    suction = next(e for e in found.effects_ if e.name == "wall_suction")
+    assert max(relative_errors(suction.params_dict(), {"k_s": 4.1, "d_thr": 0.132})) < 0.10
+    # the sweep moves mostly vertically: the vertical extra drag is what it can pin down
+    drag = next(e for e in found.effects_ if e.name == "linear_drag")
+    assert drag.values["D"][2] == pytest.approx(0.3, rel=0.10)
+
+
+def test_two_effects_across_two_flights_of_one_vehicle_are_both_named(tmp_path):
+    effects = "wall_suction:k_s=5.0,d_thr=0.125;quadratic_drag:C=0.08/0.08/0.08"
+    paths = [tmp_path / "wall.csv", tmp_path / "survey.csv"]
+    fly(None, "pid", effects, 31, paths[0], scenario="wall-survey", duration=DURATION_S)
+    fly(None, "pid", effects, 32, paths[1], scenario="survey", duration=DURATION_S)
+    found = Discovery().fit([read_log(p) for p in paths])
+    assert sorted(found.names_) == ["quadratic_drag", "wall_suction"]
+    fitted = {e.name: e.params_dict() for e in found.effects_}
+    assert max(relative_errors(fitted["wall_suction"], {"k_s": 5.0, "d_thr": 0.125})) < 0.10
+    assert max(relative_errors(fitted["quadratic_drag"], {"C": [0.08, 0.08, 0.08]})) < 0.10
+
+
+# ---------------------------------------------------------------------- the paper's case and the closed loop
+@pytest.fixture(scope="module")
+def paper_log(tmp_path_factory):
+    path = tmp_path_factory.mktemp("paper") / "sweep.csv"
+    _, summary = fly(None, "pid", "wall_suction:k_s=4.1,d_thr=0.132", 7, path, scenario="wall-sweep",
+                     duration=DURATION_S)
+    assert not summary["terminated"]
+    return path
+
+
+def test_paper_identification_recovers_k_s_and_d_thr_within_5_percent(paper_log):
+    truth = {"k_s": 4.1, "d_thr": 0.132}
+    paper = Discovery(effect="wall_suction").fit(read_log(paper_log))
+    told_nothing = Discovery().fit(read_log(paper_log))
+    assert told_nothing.names_ == ["wall_suction"]
+    for found in (paper, told_nothing):
+        errors = relative_errors(found.effects_[0].params_dict(), truth)
+        print(f"\npaper case: {found.effects_[0].params_dict()} errors {errors}")
+        assert max(errors) < 0.05
+
+
+def test_scmpc_from_the_discovered_model_beats_nominal_mpc_in_the_logs_world(paper_log, tmp_path):
+    found = Discovery().fit(read_log(paper_log))
+    model_path = tmp_path / "model.json"
+    found.model_.save(model_path)
+    check = closed_loop_check(model_path, load_scenario(scenario_path(paper_log)), seeds=[0])
+    print("\nclosed loop:", json.dumps({k: check[k] for k in ("nominal_mpc", "scmpc_discovered")}))
+    scmpc, mpc = check["scmpc_discovered"], check["nominal_mpc"]
+    assert scmpc["wall_normal_rmse"] < mpc["wall_normal_rmse"]
+    assert scmpc["collisions"] == 0 and scmpc["terminated_early"] == 0
+
+
+def test_discover_command_reports_the_closed_loop_check(paper_log, tmp_path):
+    out = tmp_path / "out"
+    assert main(["discover", str(paper_log), "--out", str(out), "--closed-loop", "--closed-loop-duration", "8",
+                 "--no-plots", "--quiet"]) == 0
+    check = json.loads((out / "report.json").read_text())["closed_loop"]
+    assert check["duration_s"] == 8.0
+    assert {"nominal_mpc", "scmpc_discovered", "wall_normal_rmse_reduction"} <= set(check)
+    assert np.isfinite(check["scmpc_discovered"]["wall_normal_rmse"])
+
+
+# ---------------------------------------------------------------------- rates and runtime
+def test_a_50_hz_log_and_a_1_khz_log(tmp_path):
+    slow = tmp_path / "slow.csv"
+    fly(None, "pid", "ground_effect:radius=0.08", 41, slow, scenario="ground-survey", duration=DURATION_S, rate_hz=50.0)
+    fast = tmp_path / "fast.csv"
+    write_log(simulate_1khz_log("ground_effect:radius=0.08", "ground-survey", 20.0, 42), fast)
+    for path, rate in ((slow, 50.0), (fast, 1000.0)):
+        log = read_log(path)
+        assert log.rate_hz == pytest.approx(rate, rel=1e-6)
+        found = Discovery().fit(log)
+        assert found.names_ == ["ground_effect"]
+        assert found.effects_[0].values["radius"][0] == pytest.approx(0.08, rel=0.10)
+
+
+def test_discover_takes_at_most_10_s_for_a_60_s_log_at_100_hz(tmp_path):
+    path = tmp_path / "long.csv"
+    fly(None, "pid", "wall_suction:k_s=4.1,d_thr=0.132;linear_drag:D=0.2/0.2/0.2", 51, path, scenario="wall-survey",
+        duration=60.0)
+    assert read_log(path).n_samples == 6000
+    started = time.perf_counter()
+    assert main(["discover", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    elapsed = time.perf_counter() - started
+    print(f"\ndiscover on a 60 s, 100 Hz log (two effects, with plots): {elapsed:.2f} s")
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert sorted(e["name"] for e in report["effects"]) == ["linear_drag", "wall_suction"]
+    assert elapsed <= 10.0
