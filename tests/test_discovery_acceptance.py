@@ -183,3 +183,21 @@ def test_discover_takes_at_most_10_s_for_a_60_s_log_at_100_hz(tmp_path):
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert sorted(e["name"] for e in report["effects"]) == ["linear_drag", "wall_suction"]
     assert elapsed <= 10.0
+
+
+# ---------------------------------------------------------------------- what no candidate explains
+def test_a_residual_no_candidate_explains_is_reported_as_unexplained_with_where_it_is(tmp_path, capsys):
+    path = tmp_path / "ground.csv"
+    fly(None, "pid", "ground_effect:radius=0.08", 61, path, scenario="ground-survey", duration=DURATION_S)
+    out = tmp_path / "out"
+    # the ground effect is left out of the candidates: nothing offered can explain the residual
+    assert main(["discover", str(path), "--out", str(out), "--candidates", "wall_suction,linear_drag,quadratic_drag",
+                 "--no-plots", "--quiet"]) == 0
+    assert "UNEXPLAINED residual" in capsys.readouterr().out
+    report = json.loads((out / "report.json").read_text())
+    assert report["effects"] == []
+    where = report["unexplained"]["where"]
+    assert where["regressor"] == "height above ground"
+    assert where["range"][0] < 0.1 and where["range"][1] < 0.25
+    assert where["direction_world"][2] > 0.95  # the ground pushes up
+    assert report["unexplained"]["force_rms_N"] > 0.1
