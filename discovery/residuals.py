@@ -19,6 +19,11 @@ aerodynamic force of model ``M`` at the samples. With a measured acceleration th
 first term is ``m K[a]`` instead. Effects are evaluated at the smoothed position and
 velocity and the logged attitude and body rates.
 
+The window is long (1 s by default) because nothing is lost by it: both sides are
+smoothed alike, so a long window only averages noise away (the derivative's noise
+falls as window^-1.5, the thrust noise's as window^-0.5), while every model is still
+compared with the data on exactly the same footing.
+
 :class:`FlightData` holds every segment of every log prepared this way, with the
 cross-validation folds (:attr:`Segment.fold`) that all held-out figures use.
 """

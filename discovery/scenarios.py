@@ -5,7 +5,16 @@ wall suction (the sweep approaches the wall), ground and ceiling effects (the sw
 spans 2 m of height, so with the right altitude and ceiling it passes close to
 both), thrust errors and steady forces; but none flies fast or in every direction,
 and drag only shows with speed along each body axis. :class:`SurveyReference` is a
-Lissajous figure whose speed along every world axis sweeps from zero to a few m/s.
+Lissajous figure whose speed along every world axis sweeps from zero to a few m/s,
+or, small and slow, keeps the vehicle close to the ground, a ceiling or the wall for
+the whole flight (a localised effect then dominates the log instead of hiding in
+noise for most of it). Its sinusoids have no velocity steps: the sweep's steps make
+the PID saturate rotors for an instant, which no aerodynamic effect describes.
+
+Flying inside the suction zone (or under a ceiling) needs a controller stiffer than
+the pull's negative stiffness: two rotors give ``2 k_s`` N/m, above the default PID's
+``m Kp = 8`` N/m already at the paper's ``k_s = 4.1`` N/m, so the default PID drifts
+into the wall. The wall and ceiling scenarios therefore fly the PID with larger gains.
 
 :class:`Retarget` flies any reference in an existing environment without changing
 the environment: it rewrites the observation's reference fields (``p_error``,
