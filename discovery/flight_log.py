@@ -18,7 +18,8 @@ column                 unit      meaning
 ``rotor_0 .. rotor_3`` N         optional: per-rotor thrust (all four or none)
 =====================  ========  =====================================================
 
-The command on a row is the one applied from that row's time until the next row's.
+The command on a row is the one applied from that row's time until the next row's, and
+so are the rotor thrusts (what the rotors produced over that step).
 Other columns are allowed and ignored. Without ``ax, ay, az`` the acceleration is
 derived from the velocity by a smoothing differentiator
 (:mod:`discovery.differentiation`). Sample rates from 50 Hz to 1 kHz are supported;

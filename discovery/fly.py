@@ -182,7 +182,8 @@ def record_flight(env: gym.Env, policy: Any, *, seed: int, nominal_vehicle: Vehi
                   progress: bool = False) -> tuple[FlightLog, dict[str, Any]]:
     """Fly one episode and return the log and a summary (steps, collisions, how it ended, truth).
 
-    Row ``k`` holds the measured state before step ``k`` and the command of step ``k``.
+    Row ``k`` holds the measured state before step ``k``, the command of step ``k`` and (optionally)
+    the rotor thrusts that command produced over the step.
     """
     base = env.unwrapped
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x10C]))
@@ -204,9 +205,9 @@ def record_flight(env: gym.Env, policy: Any, *, seed: int, nominal_vehicle: Vehi
         action = np.asarray(action, dtype=float).reshape(4)
         command = base.action_mapping.to_physical(action)
         states.append((info["time"], info["p_world"], info["v_world"], info["q_body_to_world"], info["omega_body"]))
-        thrusts.append(info["rotor_thrusts"])
         commands.append(command)
         obs, _, terminated, truncated, info = env.step(action)
+        thrusts.append(info["rotor_thrusts"])  # what this step's command made the rotors produce
         effect_forces.append(info["effect_forces_world"])
         if terminated or truncated:
             break

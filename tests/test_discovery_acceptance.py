@@ -201,3 +201,15 @@ def test_a_residual_no_candidate_explains_is_reported_as_unexplained_with_where_
     assert where["range"][0] < 0.1 and where["range"][1] < 0.25
     assert where["direction_world"][2] > 0.95  # the ground pushes up
     assert report["unexplained"]["force_rms_N"] > 0.1
+
+
+def test_a_log_with_a_dropout_is_processed_in_two_segments(paper_log, tmp_path):
+    lines = paper_log.read_text().splitlines()
+    gappy = tmp_path / "gappy.csv"
+    gappy.write_text("\n".join(lines[:1201] + lines[1301:]) + "\n")  # 1 s of samples missing after 12 s
+    gappy.with_suffix(".json").write_text(paper_log.with_suffix(".json").read_text())
+    log = read_log(gappy)
+    assert len(log.segments()) == 2
+    found = Discovery().fit(log)
+    assert found.names_ == ["wall_suction"]
+    assert max(relative_errors(found.effects_[0].params_dict(), {"k_s": 4.1, "d_thr": 0.132})) < 0.05

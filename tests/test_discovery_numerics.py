@@ -110,3 +110,25 @@ def test_prediction_replaying_the_log_is_exact_with_the_true_model(noise_free_gr
     assert len(exact) > 50
     assert np.sqrt(np.mean(exact**2)) < 1e-3
     assert np.sqrt(np.mean(off**2)) > 1e-2
+
+
+@pytest.mark.parametrize("columns", ["acceleration", "rotor_thrusts"])
+def test_optional_columns_feed_the_residual_consistently(columns):
+    """Measured acceleration replaces the differentiated velocity; logged rotor thrusts replace the command."""
+    log, summary = fly(None, "pid", "ceiling_effect:radius=0.07", 4, None, scenario="ceiling-survey", duration=10.0,
+                       env_kwargs={"noise": columns == "acceleration"}, noise=None,
+                       with_acceleration=columns == "acceleration", with_rotor_thrusts=columns == "rotor_thrusts")
+    data = prepare([log])
+    seg = data.segments[0]
+    truth = seg.kernel.step_average(summary["effect_forces_world"]["ceiling_effect"][:-1])
+    residual = data.residuals(data.nominal_model)[0]
+    assert np.abs(truth).max() > 0.1
+    if columns == "rotor_thrusts":
+        # the logged rotor thrusts carry the command noise, so with them the residual is the effect alone
+        assert np.abs(residual - truth).max() < 5e-3
+    else:
+        # a measured acceleration (here with the command noise in the flight) gives the same residual as velocity
+        log.a_world = None
+        by_derivative = prepare([log]).residuals(data.nominal_model)[0]
+        assert np.abs(residual - by_derivative).max() < 0.02
+        assert np.sqrt(np.mean((residual - truth) ** 2)) < 0.03
