@@ -18,6 +18,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench-mpc": ("controllers.benchmark", "time SC-MPC solves in closed loop against IPOPT on the same problems"),
     "compare": ("wall_inspector.compare", "reproduce the paper's Tables I and II with PID, MPC and SC-MPC (tables, JSON, plots)"),
     "train": ("agents.train", "train a PPO agent on a wall task (checkpoints, TensorBoard, model card)"),
+    "notebooks": ("wall_inspector.notebooks", "run the notebooks top to bottom (and save their outputs)"),
     "readme": ("wall_inspector.readme", "copy result tables written by other commands into README.md"),
     "fly": ("discovery.fly", "record a flight log (CSV + JSON) from the simulator with measurement noise"),
     "discover": ("discovery.cli", "find, name and fit what the nominal model misses in flight logs; write a model file"),
