@@ -52,7 +52,8 @@ class SampleStates:
 
 
 @lru_cache(maxsize=128)
-def _mapped(structure_key: tuple, rotors: tuple, scene_structure: tuple, gravity: float, jacobian: bool) -> CompiledFunction:
+def _mapped(structure_key: tuple, rotors: tuple, scene_structure: tuple, gravity: float,
+            jacobian: bool) -> CompiledFunction:
     model = AeroModel([make_effect(name, **dict(options)) for name, options in structure_key])
     placeholder = _placeholder_scene(scene_structure)
     f = model.function(np.asarray(rotors), placeholder, gravity)
@@ -137,7 +138,7 @@ class ForceEvaluator:
         theta = np.asarray(theta, dtype=float)
         per_sample = theta.ndim == 2
         if not per_sample:
-            shared = np.ascontiguousarray(np.broadcast_to(theta.reshape(-1, 1), (self.param_size, CHUNK))).ravel(order="F")
+            shared = np.repeat(theta.reshape(-1, 1), CHUNK, axis=1).ravel(order="F")
         outputs: list[list[np.ndarray]] = []
         for p, R, v, w, f, index, count in self._packed(states):
             th = np.ravel(theta[index].T, order="F") if per_sample else shared

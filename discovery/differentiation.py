@@ -24,8 +24,6 @@ lacks.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from scipy.signal import fftconvolve
 from scipy.sparse import csr_matrix
@@ -85,7 +83,8 @@ class LocalPolynomial:
             self.interior = {}
         self.edge = dict(zip(("value", "derivative", "step"), self._weights(t, self.rows, self.start[self.rows])))
 
-    def _weights(self, t: np.ndarray, rows: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _weights(self, t: np.ndarray, rows: np.ndarray,
+                 starts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Value, derivative and matched step weights for ``rows`` whose windows begin at ``starts``."""
         offsets = np.arange(self.window)
         scale = max(float(t[self.window - 1] - t[0]) / 2.0, 1e-9)

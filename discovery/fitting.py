@@ -261,7 +261,8 @@ class EffectFit:
         effects = [template.with_params(th) for template, th in zip(self.templates, self._split(theta))]
         return FitResult(effects, theta, std, float(best.cost), int(best.fun.size), bool(best.success), best.message)
 
-    def _standard_errors(self, theta: np.ndarray, masks: list[np.ndarray], jac: np.ndarray, fun: np.ndarray) -> np.ndarray:
+    def _standard_errors(self, theta: np.ndarray, masks: list[np.ndarray], jac: np.ndarray,
+                         fun: np.ndarray) -> np.ndarray:
         n, p = jac.shape
         if p == 0:
             return np.zeros(0)

@@ -93,7 +93,8 @@ def _effects_list(spec: Any) -> list[Effect]:
 
 
 def prepare_flight(env_id: str, effects: Any = None, env_kwargs: dict[str, Any] | None = None, *,
-                   survey: dict[str, Any] | None = None, duration: float | None = None, rate_hz: float = 100.0) -> FlightSetup:
+                   survey: dict[str, Any] | None = None, duration: float | None = None,
+                   rate_hz: float = 100.0) -> FlightSetup:
     """Build the env that flies ``effects`` on top of the nominal vehicle.
 
     ``env_kwargs`` are the env's keyword arguments except those that set effects
@@ -258,12 +259,12 @@ def scenario_path(csv_path: str | Path) -> Path:
 
 
 def fly(env_id: str | None = None, policy: str = "pid", effects: Any = None, seed: int = 0,
-        out: str | Path | None = None, *, scenario: str | None = None, env_kwargs: dict[str, Any] | None = None, survey: dict[str, Any] | None = None,
-        duration: float | None = None, rate_hz: float = 100.0,
+        out: str | Path | None = None, *, scenario: str | None = None, env_kwargs: dict[str, Any] | None = None,
+        survey: dict[str, Any] | None = None, duration: float | None = None, rate_hz: float = 100.0,
         control_rate_hz: float | None = None, noise: MeasurementNoise | None = MeasurementNoise(),
         policy_model: str | Path | None = None, policy_kwargs: dict[str, Any] | None = None,
-        with_acceleration: bool = False, with_rotor_thrusts: bool = False,
-        overwrite: bool = False, progress: bool = False) -> tuple[FlightLog, dict[str, Any]]:
+        with_acceleration: bool = False, with_rotor_thrusts: bool = False, overwrite: bool = False,
+        progress: bool = False) -> tuple[FlightLog, dict[str, Any]]:
     """Fly and (if ``out`` is given) write ``out`` (CSV), its JSON sidecar and the scenario file.
 
     ``scenario`` names a preset of :data:`~discovery.scenarios.SCENARIOS` whose env id, env
@@ -327,10 +328,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", choices=sorted(SCENARIOS), default=None,
                         help="a ready-made flight that excites effects: " +
                         "; ".join(f"{s.name}: {s.description}" for s in SCENARIOS.values()))
-    parser.add_argument("--policy", default="pid", help="pid, mpc, scmpc or the path of a saved Stable-Baselines3 agent")
+    parser.add_argument("--policy", default="pid",
+                        help="pid, mpc, scmpc or the path of a saved Stable-Baselines3 agent")
     parser.add_argument("--policy-model", default=None, help="model file for --policy scmpc")
     parser.add_argument("--policy-kwargs", default="{}", help='controller keyword arguments as JSON, e.g. '
-                        '\'{"kp": [20, 20, 10], "kv": [8, 8, 6]}\' for a PID stiff enough to fly inside the suction zone')
+                        '\'{"kp": [30, 30, 10], "kv": [11, 11, 6]}\' for a PID stiff enough to fly inside the '
+                        'suction zone')
     parser.add_argument("--effects", default="", help='effects flown, e.g. "wall_suction:k_s=4.1,d_thr=0.132;'
                         'linear_drag:D=0.2/0.2/0.1" (default: none, only the nominal vehicle)')
     parser.add_argument("--seed", type=int, default=0)
@@ -368,19 +371,17 @@ def run(args: argparse.Namespace) -> int:
     noise = MeasurementNoise().scaled(args.noise_scale) if args.noise_scale > 0 else None
     try:
         log, summary = fly(args.env, args.policy, args.effects, args.seed, args.out, scenario=args.scenario,
-                           env_kwargs=env_kwargs,
-                           survey=survey, duration=args.duration,
-                           rate_hz=args.rate, control_rate_hz=args.control_rate, noise=noise,
-                           policy_model=args.policy_model, policy_kwargs=policy_kwargs or None,
-                           with_acceleration=args.with_acceleration,
+                           env_kwargs=env_kwargs, survey=survey, duration=args.duration, rate_hz=args.rate,
+                           control_rate_hz=args.control_rate, noise=noise, policy_model=args.policy_model,
+                           policy_kwargs=policy_kwargs or None, with_acceleration=args.with_acceleration,
                            with_rotor_thrusts=args.with_rotor_thrusts, overwrite=args.overwrite, progress=True)
     except (ValueError, FileNotFoundError, FileExistsError) as exc:
         print(f"fly: {exc}", file=sys.stderr)
         return 2
     ending = ("ended early: collision" if summary["terminated"] and summary["collisions"]
               else "ended early: strayed from the reference" if summary["terminated"] else "full length")
-    print(f"flew {summary['scenario']['env_id']} with {args.policy}: {summary['steps']} samples, {summary['duration_s']:.2f} s "
-          f"({ending}; {summary['collisions']} collision(s))")
+    print(f"flew {summary['scenario']['env_id']} with {args.policy}: {summary['steps']} samples, "
+          f"{summary['duration_s']:.2f} s ({ending}; {summary['collisions']} collision(s))")
     flown = ", ".join(f"{e['name']}({', '.join(f'{k}={v}' for k, v in e['params'].items())})"
                       for e in summary["scenario"]["effects"]) or "none"
     print(f"effects flown (kept out of the log): {flown}")

@@ -121,8 +121,9 @@ def plot_all(found, out_dir: str | Path) -> list[Path]:
         ax.set_xlabel(f"logged displacement {'xyz'[axis]} (m)")
         ax.set_ylabel(f"predicted displacement {'xyz'[axis]} (m)")
         ax.legend(loc="upper left", fontsize=8)
+    before_cm, after_cm = 100 * found.gap_before_["prediction_rms_m"], 100 * found.gap_after_["prediction_rms_m"]
     fig.suptitle(f"open-loop predictions over {found.horizon_s:g} s replaying the logged thrust (held-out): "
-                 f"{found.gap_before_['prediction_rms_m'] * 100:.2f} cm -> {found.gap_after_['prediction_rms_m'] * 100:.2f} cm RMS")
+                 f"{before_cm:.2f} cm -> {after_cm:.2f} cm RMS")
     fig.tight_layout()
     path = out / "prediction.png"
     fig.savefig(path, dpi=90)

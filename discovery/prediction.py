@@ -48,7 +48,8 @@ class PredictionWindows:
     fold: np.ndarray  # (w,) fold of each window
 
 
-def windows(data: FlightData, horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S) -> list[PredictionWindows]:
+def windows(data: FlightData, horizon_s: float = DEFAULT_HORIZON_S,
+            stride_s: float = DEFAULT_STRIDE_S) -> list[PredictionWindows]:
     """Prediction windows of every segment that stay inside one fold's time block."""
     out = []
     for index, seg in enumerate(data.segments):

@@ -3,7 +3,8 @@
 Candidate regressors, per sample (SI): the distance of each rotor centre to each wall
 plane and the nearest one per wall, the height of the lowest rotor above the ground,
 the depth of the highest rotor under the ceiling, the speed and the (signed) velocity
-along each body axis, the collective thrust and the time. Rotor positions come from the smoothed position and logged attitude.
+along each body axis, the collective thrust and the time. Rotor positions come from
+the smoothed position and logged attitude.
 
 :func:`localise_residual` asks which regressor the residual depends on: for each
 regressor the residual is averaged in bins of that regressor on the training folds

@@ -142,7 +142,8 @@ class FlightData:
         return self.concat([s.t for s in self.segments])
 
 
-def _fold_assignment(t: np.ndarray, t0: float, block_s: float, n_folds: int, guard_s: float) -> tuple[np.ndarray, np.ndarray]:
+def _fold_assignment(t: np.ndarray, t0: float, block_s: float, n_folds: int,
+                     guard_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Fold of each sample (blocks of ``block_s`` dealt round robin) and the training masks.
 
     Training for fold k excludes fold k and the samples within ``guard_s`` of it, whose

@@ -118,7 +118,8 @@ def simulate_1khz_log(effects: str, scenario: str, duration: float, seed: int,
         rows[k, 7:11], rows[k, 11:14] = x[StateIndex.q_body_to_world], x[StateIndex.omega_body]
         rows[k, 14:18] = command
         x = simulator.step(x, noisy)[0]
-    q = Rotation.from_quat(np.roll(rows[:, 7:11], -1, axis=1)) * Rotation.from_rotvec(rng.normal(0, noise.attitude, (n, 3)))
+    tilt = Rotation.from_rotvec(rng.normal(0, noise.attitude, (n, 3)))
+    q = Rotation.from_quat(np.roll(rows[:, 7:11], -1, axis=1)) * tilt
     q_wxyz = np.roll(q.as_quat(), 1, axis=1)
     return FlightLog(t=rows[:, 0], p_world=rows[:, 1:4] + rng.normal(0, noise.position, (n, 3)),
                      v_world=rows[:, 4:7] + rng.normal(0, noise.velocity, (n, 3)),

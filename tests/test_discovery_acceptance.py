@@ -43,11 +43,12 @@ def hidden(tmp_path_factory):
             assert not summary["terminated"], f"{name} flight ended early"
             found = Discovery().fit(read_log(path))  # told nothing
             fitted = found.effects_[0].params_dict() if found.names_ == [name] else None
+            before, after = found.gap_before_, found.gap_after_
             rows.append({
                 "effect": name, "truth": params, "found": found.names_, "fitted": fitted,
                 "worst_param_error": max(relative_errors(fitted, params)) if fitted else None,
-                "force_gap_reduction": 1 - found.gap_after_["force_rms_N"] / found.gap_before_["force_rms_N"],
-                "prediction_gap_reduction": 1 - found.gap_after_["prediction_rms_m"] / found.gap_before_["prediction_rms_m"],
+                "force_gap_reduction": 1 - after["force_rms_N"] / before["force_rms_N"],
+                "prediction_gap_reduction": 1 - after["prediction_rms_m"] / before["prediction_rms_m"],
             })
     right = [r for r in rows if r["found"] == [r["effect"]]]
     print("\nhidden single effects:", json.dumps({
