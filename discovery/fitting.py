@@ -6,6 +6,13 @@ with :func:`scipy.optimize.least_squares` (trust-region reflective, within each
 parameter's range), the Jacobian being CasADi's derivative of the same effect
 definition the simulator uses (:class:`~discovery.aero_eval.ForceEvaluator`).
 
+Relation to the paper (Sec. 3.4): for ``wall_suction`` the Jacobian is CasADi's exact
+derivative of the per-rotor model (Eq. 10). It equals Eq. 29 for ``k_s``; for ``d_thr``
+it sums ``k_s`` over the rotors inside the threshold only, where Eq. 30 writes
+``4 k_s`` as if all four rotors were. The paper solves with Levenberg-Marquardt; SciPy's
+trust-region reflective method used here is the same kind of damped Gauss-Newton
+step, kept inside each parameter's range from the library.
+
 Speed without shortcuts in the model:
 
 - an effect whose force is affine in its parameters (drag, constant force, thrust
