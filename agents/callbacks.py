@@ -17,7 +17,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.checkpoints import save_checkpoint
 
-__all__ = ["ProgressBar", "PeriodicCheckpoint", "SaveBestCheckpoint", "TrainingClock"]
+__all__ = ["ProgressBar", "PeriodicCheckpoint", "SaveBestCheckpoint", "TrainingClock", "CollisionLog"]
 
 
 class TrainingClock:
@@ -102,3 +102,17 @@ class SaveBestCheckpoint(BaseCallback):
         if self.on_save is not None:
             self.on_save()
         return True
+
+
+class CollisionLog(BaseCallback):
+    """Logs ``rollout/collisions_per_episode`` and ``rollout/collision_episode_fraction``
+    (over Stable-Baselines3's buffer of recent episodes) to TensorBoard at each rollout end."""
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        counts = [info["collisions"] for info in self.model.ep_info_buffer if "collisions" in info]
+        if counts:
+            self.logger.record("rollout/collisions_per_episode", float(np.mean(counts)))
+            self.logger.record("rollout/collision_episode_fraction", float(np.mean(np.asarray(counts) > 0)))

@@ -237,7 +237,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     from stable_baselines3.common.callbacks import CallbackList, EvalCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from agents.callbacks import PeriodicCheckpoint, ProgressBar, SaveBestCheckpoint, TrainingClock
+    from agents.callbacks import CollisionLog, PeriodicCheckpoint, ProgressBar, SaveBestCheckpoint, TrainingClock
     from agents.checkpoints import load_model, read_json, restore_normalization, save_checkpoint, write_model_card
     from agents.envs import make_vec_env
 
@@ -285,7 +285,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                                   eval_freq=max(int(config["eval"]["freq"]) // config["n_envs"], 1),
                                   log_path=str(out / "eval"), deterministic=True, verbose=verbose)
         evaluation.best_mean_reward = best_so_far
-        callbacks = [evaluation]
+        callbacks = [evaluation, CollisionLog()]
         if int(config["checkpoint_freq"]) > 0:
             callbacks.append(PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks))
         if progress_bar:

@@ -39,7 +39,13 @@ def test_cli_run_writes_checkpoints_logs_and_card(cli_run):
         for name in ("model.zip", "normalization.json", "policy.json"):
             assert (folder / name).is_file(), folder / name
     assert sorted(p.name for p in (out / "checkpoints").iterdir()) == ["000002048"]
-    assert list((out / "tb").rglob("events.out.tfevents*")), "no TensorBoard events written"
+    events = list((out / "tb").rglob("events.out.tfevents*"))
+    assert events, "no TensorBoard events written"
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    scalars = EventAccumulator(str(events[0].parent)).Reload().Tags()["scalars"]
+    for tag in ("rollout/ep_rew_mean", "rollout/collisions_per_episode", "eval/mean_reward", "train/value_loss"):
+        assert tag in scalars, tag
     evaluations = np.load(out / "eval" / "evaluations.npz")
     assert list(evaluations["timesteps"]) == [1024, 2048, 3072]
 
