@@ -27,7 +27,7 @@ What is flown and what is written:
 
 ``--scenario NAME`` picks a ready-made flight from :data:`discovery.scenarios.SCENARIOS`
 (its env id and keyword arguments, and the survey reference where it has one).
-The log rate ``--rate`` is the env's control rate, 50 to 500 Hz (the env's
+The log rate ``--rate`` is the env's control rate, 50 Hz to 1 kHz (the env's
 ``control_dt`` range); the policy runs at ``--control-rate`` (default 100 Hz) and its
 command is held in between.
 """
@@ -106,8 +106,8 @@ def prepare_flight(env_id: str, effects: Any = None, env_kwargs: dict[str, Any] 
     clashing = sorted({"effects", "k_s", "d_thr", "model"} & set(kwargs))
     if clashing:
         raise ValueError(f"env keyword argument(s) {clashing} set effects; give the effects with --effects instead")
-    if not 50.0 <= rate_hz <= 500.0:
-        raise ValueError(f"--rate must be in [50, 500] Hz (the env's control_dt range), got {rate_hz:g}")
+    if not 50.0 <= rate_hz <= 1000.0:
+        raise ValueError(f"--rate must be in [50, 1000] Hz (the env's control_dt range), got {rate_hz:g}")
     vehicle_arg = kwargs.pop("vehicle", None)
     nominal = (vehicle_arg if isinstance(vehicle_arg, VehicleParams)
                else VehicleParams.from_dict(vehicle_arg) if isinstance(vehicle_arg, dict)
@@ -343,7 +343,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--survey", default=None, help='fly a Lissajous survey instead of the task\'s reference, '
                         'as JSON: {"amplitude": [ax, ay, az] (m), "period": [Tx, Ty, Tz] (s), "centre": [x, y, z] (m)}')
     parser.add_argument("--duration", type=float, default=None, help="flight length (s; default the task's)")
-    parser.add_argument("--rate", type=float, default=100.0, help="log (and env) rate in Hz, 50 to 500")
+    parser.add_argument("--rate", type=float, default=100.0, help="log (and env) rate in Hz, 50 to 1000")
     parser.add_argument("--control-rate", type=float, default=None, help="policy rate in Hz (default min(rate, 100))")
     parser.add_argument("--noise-scale", type=float, default=1.0, help="multiplies every measurement noise level "
                         "(0 for noiseless measurements)")

@@ -1,20 +1,11 @@
-"""Helpers for the discovery tests: the hidden-effect protocol and a 1 kHz log straight from the simulator."""
+"""Helpers for the discovery tests: the hidden-effect protocol."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from discovery.flight_log import FlightLog, NominalVehicle
-from discovery.fly import MeasurementNoise, prepare_flight
-from discovery.scenarios import SCENARIOS
-from wall_env.dynamics import Simulator, StateIndex
-from wall_env.effects import effects_from_spec
-from wall_env.model_file import FlightModel
-from wall_env.observation import OBSERVATION_FIELDS, OBSERVATION_SIZE
-from wall_env.vehicle import VehicleParams
 
 ARM = 0.1 / math.sqrt(2.0)  # the default vehicle's rotor offset along body x (m)
 
@@ -69,60 +60,3 @@ def relative_errors(fitted: dict, truth: dict) -> list[float]:
     return out
 
 
-def simulate_1khz_log(effects: str, scenario: str, duration: float, seed: int,
-                      noise: MeasurementNoise = MeasurementNoise()) -> FlightLog:
-    """A 1 kHz log of ``scenario`` flown by the PID (at 100 Hz, held) in the compiled simulator.
-
-    The env's control step cannot go below 2 ms, so this steps :class:`wall_env.dynamics.Simulator`
-    at 1 ms directly: the same dynamics and effects, the env only supplies the scene and the
-    reference. Command noise as in the env (0.2 N, 0.2 rad/s per 10 ms control step).
-    """
-    from controllers import PID
-    from controllers.env_description import describe_env
-
-    preset = SCENARIOS[scenario]
-    setup = prepare_flight(preset.env_id, None, preset.env_kwargs, survey=preset.survey, duration=duration)
-    env = setup.env
-    env.reset(seed=seed)
-    description = describe_env(env)
-    reference, scene, mapping = description.reference, env.unwrapped.scene, description.action_mapping
-    env.close()
-    vehicle = VehicleParams()
-    truth = FlightModel(vehicle, effects_from_spec(effects)).aero_model()
-    simulator = Simulator(vehicle, truth, scene, 0.001, 1)
-    pid = PID(description, **preset.policy_kwargs)
-    rng = np.random.default_rng(seed)
-    n = int(round(duration / 0.001))
-    x = simulator.hover_state(reference.position(0.0)[0], np.roll(Rotation.from_euler("z", reference.yaw).as_quat(), 1))
-    rows = np.empty((n, 18))
-    command = np.zeros(4)
-    noisy = np.zeros(4)
-    f = OBSERVATION_FIELDS
-    for k in range(n):
-        t = k * 0.001
-        R = Rotation.from_quat(np.roll(x[StateIndex.q_body_to_world], -1)).as_matrix()
-        if k % 10 == 0:
-            p_ref, v_ref, _ = reference.sample(t)
-            obs = np.zeros(OBSERVATION_SIZE)
-            obs[f["p_world"]], obs[f["v_world"]] = x[StateIndex.p_world], x[StateIndex.v_world]
-            obs[f["R_body_to_world"]] = R.ravel()
-            obs[f["omega_body"]] = x[StateIndex.omega_body]
-            obs[f["p_error"]] = x[StateIndex.p_world] - p_ref[0]
-            obs[f["v_error"]] = x[StateIndex.v_world] - v_ref[0]
-            obs[f["time"]] = t
-            action, _ = pid.predict(obs, episode_start=np.array([k == 0]))
-            command = mapping.to_physical(np.asarray(action, dtype=float))
-            noisy = command + rng.normal(0.0, 1.0, 4) * np.array([0.2, 0.2, 0.2, 0.2])
-        rows[k, 0] = t
-        rows[k, 1:4], rows[k, 4:7] = x[StateIndex.p_world], x[StateIndex.v_world]
-        rows[k, 7:11], rows[k, 11:14] = x[StateIndex.q_body_to_world], x[StateIndex.omega_body]
-        rows[k, 14:18] = command
-        x = simulator.step(x, noisy)[0]
-    tilt = Rotation.from_rotvec(rng.normal(0, noise.attitude, (n, 3)))
-    q = Rotation.from_quat(np.roll(rows[:, 7:11], -1, axis=1)) * tilt
-    q_wxyz = np.roll(q.as_quat(), 1, axis=1)
-    return FlightLog(t=rows[:, 0], p_world=rows[:, 1:4] + rng.normal(0, noise.position, (n, 3)),
-                     v_world=rows[:, 4:7] + rng.normal(0, noise.velocity, (n, 3)),
-                     q_body_to_world=q_wxyz * np.sign(q_wxyz[:, :1]),
-                     omega_body=rows[:, 11:14] + rng.normal(0, noise.body_rate, (n, 3)), thrust_cmd=rows[:, 14],
-                     omega_cmd_body=rows[:, 15:18], vehicle=NominalVehicle.from_vehicle_params(vehicle), scene=scene)

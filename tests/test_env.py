@@ -215,7 +215,7 @@ def test_extra_effects_and_model_files_reach_the_simulator(tmp_path):
         ({"randomize": {"standoff": (0.01, 0.3)}}, r"standoff must be in"),
         ({"render_mode": "video"}, r"render_mode must be None or one of"),
         ({"physics_substeps": 0}, r"physics_substeps must be an integer in \[1, 100\]"),
-        ({"control_dt": 0.5}, r"control_dt must be in \[0\.002, 0\.05\]"),
+        ({"control_dt": 0.5}, r"control_dt must be in \[0\.001, 0\.05\]"),
         ({"effects": {"linear_drag": {}}}, r"linear_drag is the vehicle's drag"),
         ({"effects": {"wall_suction": {"k_s": 2.0}}, "k_s": 3.0}, r"given both as keyword and in effects"),
         ({"vehicle": {"mass": 5.0}}, r"thrust_max must exceed the weight"),

@@ -171,7 +171,7 @@ class WallInspectorEnv(gym.Env):
         self._truth = truth
 
         # ---------------------------------------------------------- timing, noise, reward
-        self.control_dt = check_range("control_dt", control_dt, 0.002, 0.05)
+        self.control_dt = check_range("control_dt", control_dt, 0.001, 0.05)
         if not isinstance(physics_substeps, int) or not 1 <= physics_substeps <= 100:
             raise ValueError(f"physics_substeps must be an integer in [1, 100], got {physics_substeps!r}")
         self.noise = bool(noise)
