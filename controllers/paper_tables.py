@@ -246,10 +246,11 @@ def results_json(results: Sequence[ScenarioResult]) -> dict[str, Any]:
 
 def _plot_table_i(results: Sequence[ScenarioResult], path: Path, seed_index: int = 0) -> None:
     """Paper Fig. 6: position in the wall plane and wall-normal error against time, per k_s."""
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # not pyplot: must not switch the caller's backend
 
     scenarios = sorted({r.scenario.k_s for r in results})
-    fig, axes = plt.subplots(2, len(scenarios), figsize=(4.5 * len(scenarios), 7), squeeze=False)
+    fig = Figure(figsize=(4.5 * len(scenarios), 7))
+    axes = fig.subplots(2, len(scenarios), squeeze=False)
     for col, k_s in enumerate(scenarios):
         runs = [r for r in results if r.scenario.k_s == k_s]
         ax_traj, ax_err = axes[0, col], axes[1, col]
@@ -272,14 +273,14 @@ def _plot_table_i(results: Sequence[ScenarioResult], path: Path, seed_index: int
         ax_err.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def _plot_table_ii(results: Sequence[ScenarioResult], path: Path, seed_index: int = 0) -> None:
     """Paper Fig. 10: x, y, z against time for each method, with the reference."""
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # not pyplot: must not switch the caller's backend
 
-    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    fig = Figure(figsize=(9, 8))
+    axes = fig.subplots(3, 1, sharex=True)
     for axis, ax in enumerate(axes):
         reference_drawn = False
         for r in results:
@@ -295,7 +296,6 @@ def _plot_table_ii(results: Sequence[ScenarioResult], path: Path, seed_index: in
     axes[-1].set_xlabel("time (s)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def write_outputs(results: Sequence[ScenarioResult], out_dir: str | Path, note: str = "") -> dict[str, Path]:
@@ -303,9 +303,6 @@ def write_outputs(results: Sequence[ScenarioResult], out_dir: str | Path, note: 
 
     ``note`` heads the Markdown and is stored in the JSON (e.g. non-default MPC weights).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"markdown": out / "tables.md", "json": out / "results.json"}

@@ -42,10 +42,8 @@ def _thin(n: int, limit: int = 4000) -> np.ndarray:
 
 def plot_all(found, out_dir: str | Path) -> list[Path]:
     """Write the figures of a fitted :class:`~discovery.workflow.Discovery` into ``out_dir``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # Figure objects, not pyplot: writing files must not switch the caller's backend (notebooks)
+    from matplotlib.figure import Figure
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -68,7 +66,8 @@ def plot_all(found, out_dir: str | Path) -> list[Path]:
         name = name if name in regs else "time"
         direction = np.asarray(found.where_before_.get("direction_world") or (0.0, 0.0, 1.0))
         rows.append(("no effect named", regs[name], direction))
-    fig, axes = plt.subplots(len(rows), 2, figsize=(11, 3.6 * len(rows)), squeeze=False, sharey="row")
+    fig = Figure(figsize=(11, 3.6 * len(rows)))
+    axes = fig.subplots(len(rows), 2, squeeze=False, sharey="row")
     for (label, reg, direction), (ax_b, ax_a) in zip(rows, axes):
         x = reg.values
         for ax, residual, title, colour in ((ax_b, before, "nominal model", "tab:red"),
@@ -85,11 +84,11 @@ def plot_all(found, out_dir: str | Path) -> list[Path]:
     fig.tight_layout()
     path = out / "residual_vs_regressor.png"
     fig.savefig(path, dpi=90)
-    plt.close(fig)
     written.append(path)
 
     # ---------------------------------------------------------------- residual vs time
-    fig, ax = plt.subplots(figsize=(11, 3.5))
+    fig = Figure(figsize=(11, 3.5))
+    ax = fig.subplots()
     t = found.data_.times
     ax.plot(t[keep], np.linalg.norm(before, axis=1)[keep], ".", ms=2, color="tab:red", alpha=0.5,
             label=f"nominal ({found.gap_before_['force_rms_N']:.3f} N RMS)")
@@ -102,11 +101,11 @@ def plot_all(found, out_dir: str | Path) -> list[Path]:
     fig.tight_layout()
     path = out / "residual_time.png"
     fig.savefig(path, dpi=90)
-    plt.close(fig)
     written.append(path)
 
     # ---------------------------------------------------------------- predicted vs measured
-    fig, axes = plt.subplots(1, 3, figsize=(12, 4))
+    fig = Figure(figsize=(12, 4))
+    axes = fig.subplots(1, 3)
     start_b, pred_b, meas_b = found.prediction_before_
     _, pred_a, _ = found.prediction_after_
     for axis, ax in enumerate(axes):
@@ -127,6 +126,5 @@ def plot_all(found, out_dir: str | Path) -> list[Path]:
     fig.tight_layout()
     path = out / "prediction.png"
     fig.savefig(path, dpi=90)
-    plt.close(fig)
     written.append(path)
     return written

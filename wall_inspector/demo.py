@@ -44,10 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     log, frame = fly(args.env, args.seed, args.seconds)
     out = Path(args.out)
@@ -62,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         print("  no contact with the wall")
 
-    fig, (ax_img, ax_plot) = plt.subplots(1, 2, figsize=(11, 4))
+    fig = Figure(figsize=(11, 4))
+    ax_img, ax_plot = fig.subplots(1, 2)
     ax_img.imshow(frame)
     ax_img.set_axis_off()
     ax_img.set_title("last frame")
