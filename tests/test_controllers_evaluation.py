@@ -175,6 +175,23 @@ def test_compare_with_other_mpc_sigmas_says_so(tmp_path, capsys):
     assert "terminal_position = 0.02" in capsys.readouterr().out
 
 
+def test_compare_with_the_tuned_weights_uses_them_and_says_so(tmp_path):
+    from controllers.mpc.cost import MPCWeights, tuned_weights
+    from wall_inspector.compare import _weights
+
+    weights, note = _weights("tuned", [])
+    assert weights == tuned_weights()
+    assert weights.position == pytest.approx((0.07, 0.07, 0.2 * 0.07 / 0.15))
+    assert weights.terminal_position == pytest.approx((0.05 * 0.07 / 0.15,) * 3)
+    assert weights.rotation == MPCWeights().rotation and weights.control_rate == MPCWeights().control_rate
+    assert note.startswith("**Tuned MPC weights**")
+    assert _weights("paper", []) == (None, "")
+    code = cli_main(["compare", "--out", str(tmp_path), "--tables", "II", "--seeds-ii", "1", "--duration", "0.2",
+                     "--no-progress", "--weights", "tuned"])
+    assert code == 0
+    assert (tmp_path / "tables.md").read_text().startswith("**Tuned MPC weights**")
+
+
 def test_bench_mpc_command_reports_and_checks(tmp_path, capsys):
     path = tmp_path / "bench.json"
     code = cli_main(["bench-mpc", "--steps", "60", "--no-pin", "--json", str(path)])

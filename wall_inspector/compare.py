@@ -24,18 +24,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds-ii", type=int, default=10, help="seeds of Table II (default 10)")
     parser.add_argument("--duration", type=float, default=None,
                         help="shorten every flight to this many seconds (a quick look; not the paper's tables)")
+    parser.add_argument("--weights", choices=("paper", "tuned"), default="paper",
+                        help="MPC and SC-MPC weights: the authors' sigmas (default) or the tuned position sigmas of "
+                             "controllers.mpc.cost.tuned_weights")
     parser.add_argument("--mpc-sigma", action="append", default=[], metavar="NAME=V[/V...]",
                         help="replace one of the MPCs' sigmas (both MPC and SC-MPC), e.g. position=0.07/0.07/0.093; "
                              "names are the fields of controllers.mpc.MPCWeights (sensitivity studies, not the paper)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def _weights(items: list[str]):
-    """MPC weights with the ``--mpc-sigma`` replacements, and a note saying so (``None, ""`` if none)."""
-    from controllers.mpc.cost import MPCWeights
+def _weights(preset: str, items: list[str]):
+    """MPC weights of ``--weights`` with the ``--mpc-sigma`` replacements, and a note saying so
+    (``None, ""`` for the authors' weights)."""
+    from controllers.mpc.cost import MPCWeights, tuned_weights
 
+    base = MPCWeights() if preset == "paper" else tuned_weights()
+    base_note = "" if preset == "paper" else (
+        "**Tuned MPC weights** (`--weights tuned`): the authors' sigmas with position sigma "
+        f"{'/'.join(f'{v:.4g}' for v in base.position)} m and terminal position sigma "
+        f"{base.terminal_position[0]:.4g} m instead of 0.15/0.15/0.20 and 0.05 m "
+        "(see `controllers.mpc.cost.tuned_weights`).")
     if not items:
-        return None, ""
+        return (None if preset == "paper" else base), base_note
     fields = {f.name for f in dataclasses.fields(MPCWeights)}
     changes = {}
     for item in items:
@@ -48,12 +58,12 @@ def _weights(items: list[str]):
             raise SystemExit(f"--mpc-sigma {name}: values must be numbers, got {values!r}") from None
         changes[name] = numbers[0] if len(numbers) == 1 else tuple(numbers)
     try:
-        weights = MPCWeights(**changes)
+        weights = dataclasses.replace(base, **changes)
     except ValueError as exc:
         raise SystemExit(f"--mpc-sigma: {exc}") from None
     note = ("**Not the authors' MPC weights**: sigmas changed to "
             + ", ".join(f"{k} = {v}" for k, v in changes.items()) + " (sensitivity study).")
-    return weights, note
+    return weights, " ".join(filter(None, [base_note, note]))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -72,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_i)), env_kwargs=extra) for s in pt.TABLE_I]
     if args.tables in ("II", "both"):
         scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_ii)), env_kwargs=extra) for s in pt.TABLE_II]
-    weights, note = _weights(args.mpc_sigma)
+    weights, note = _weights(args.weights, args.mpc_sigma)
     t0 = time.perf_counter()
     results = pt.run_scenarios(scenarios, pt.paper_policies(weights), progress=not args.no_progress)
     paths = pt.write_outputs(results, args.out, note)
