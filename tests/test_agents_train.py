@@ -77,7 +77,8 @@ def test_cli_checkpoint_loads_and_flies(cli_run):
     assert again == metrics
     # and the model card's evaluation is this one, on the card's seeds
     card = json.loads((cli_run / "model_card.json").read_text())
-    assert evaluate_agent(policy_factory(cli_run / "best"), "WallInspector/WallHover-v0",
+    assert card["evaluation"]["env_kwargs"] == default_config("WallHover")["env_kwargs"]
+    assert evaluate_agent(policy_factory(cli_run / "best"), "WallInspector/WallHover-v0", card["evaluation"]["env_kwargs"],
                           seeds=card["evaluation"]["seeds"]) == card["evaluation"]["metrics"]
 
 
