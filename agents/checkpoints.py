@@ -262,6 +262,8 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
         ("timesteps in this run", training.get("timesteps_this_run")),
         ("wall-clock time of this run (s)", training.get("wall_time_s")),
         ("training throughput (env steps/s, incl. PPO updates)", training.get("steps_per_s")),
+        ("wall-clock time of the whole command (s, incl. start-up and final evaluation)",
+         training.get("command_wall_time_s")),
         ("environments / worker processes", f"{training.get('n_envs')} / {training.get('n_workers')}"),
         ("residual base controller", card.get("residual") or "none"),
         ("domain randomisation", card.get("randomize") or "off"),

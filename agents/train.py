@@ -37,6 +37,7 @@ import platform
 import shlex
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -241,6 +242,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     from agents.checkpoints import load_model, read_json, restore_normalization, save_checkpoint, write_model_card
     from agents.envs import make_vec_env
 
+    started = time.perf_counter()
     out = Path(out_dir)
     torch.set_num_threads(int(config["torch_threads"]))
     description = policy_description(config)
@@ -322,6 +324,8 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         "versions": _versions(),
         "git_commit": _git_commit(),
     })
+    # the whole command: worker start-up, training, final evaluation (resumed runs: this part only)
+    card["training"]["command_wall_time_s"] = round(time.perf_counter() - started, 2)
     write_model_card(out, card)
     return TrainingRun(card, model, train_env, out)
 
