@@ -112,13 +112,14 @@ def test_refuses_to_overwrite_a_run(cli_run):
         main(["train", "--env", "WallHover-v0", "--out", str(cli_run), "--timesteps", "1000"])
 
 
-def test_loaded_policy_acts_exactly_like_the_trained_model(tmp_path):
+def test_loaded_policy_acts_exactly_like_the_trained_model(tmp_path, capsys):
     config = default_config("WallCircle")
     config.update(timesteps=1024, n_envs=2, n_workers=1, checkpoint_freq=0)
     config["ppo"].update(n_steps=512, batch_size=512, n_epochs=1)
     config["eval"].update(freq=100_000, episodes=1)
     config["card_eval"]["episodes"] = 1
-    trained = train(config, tmp_path / "circle", progress_bar=False, verbose=0)
+    trained = train(config, tmp_path / "circle", progress_bar=True, verbose=0)
+    assert "1.02k/1.02k" in capsys.readouterr().err  # the progress bar counted all 1024 env steps
     assert trained.normalizer.obs_rms.count > 1000  # statistics were learnt, not left at their start
 
     loaded = load_policy(tmp_path / "circle")  # the final checkpoint
