@@ -324,6 +324,11 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         "versions": _versions(),
         "git_commit": _git_commit(),
     })
+    curve_file = out / "eval" / "evaluations.npz"
+    if curve_file.is_file():  # the evaluation callback's history: [env steps, mean return, mean length (steps)]
+        history = np.load(curve_file)
+        card["training"]["eval_curve"] = [[int(t), round(float(np.mean(r)), 2), round(float(np.mean(n)), 1)] for t, r, n
+                                          in zip(history["timesteps"], history["results"], history["ep_lengths"])]
     # the whole command: worker start-up, training, final evaluation (resumed runs: this part only)
     card["training"]["command_wall_time_s"] = round(time.perf_counter() - started, 2)
     write_model_card(out, card)

@@ -60,6 +60,7 @@ def test_cli_run_writes_checkpoints_logs_and_card(cli_run):
     assert training["total_timesteps"] == 3072 and training["timesteps_this_run"] == 3072
     assert 0 < training["wall_time_s"] < training["command_wall_time_s"]
     assert training["steps_per_s"] == pytest.approx(3072 / training["wall_time_s"], rel=0.02)
+    assert [row[0] for row in training["eval_curve"]] == [1024, 2048, 3072]
     metrics = card["evaluation"]["metrics"]
     assert metrics["episodes"] == 2 and metrics["mean_length_s"] > 0
     assert np.isfinite(metrics["wall_normal_rmse_m"])
