@@ -61,7 +61,7 @@ _FINAL_FILES = ("model.zip", "normalization.json", "policy.json")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", help="task, e.g. WallInspector/WallSweep-v0 (or WallSweep-v0, wall_sweep)")
     parser.add_argument("--timesteps", type=int, help="total env steps (default: the task's config)")
-    parser.add_argument("--n-envs", type=int, help="environments in the vector env (default: config, 16)")
+    parser.add_argument("--n-envs", type=int, help="environments in the vector env (default: config, 32)")
     parser.add_argument("--workers", type=int, help="worker processes running them (default: config, 2)")
     parser.add_argument("--seed", type=int, help="random seed (default: config, 0)")
     parser.add_argument("--out", help="run folder for checkpoints, logs and the model card")
@@ -121,8 +121,7 @@ def _command(args: argparse.Namespace, config: dict[str, Any]) -> str:
                  "--out", str(args.out)]
         if args.config:
             parts += ["--config", args.config]
-        if config["randomize"]:
-            parts.append("--randomize")
+        parts.append("--randomize" if config["randomize"] else "--no-randomize")  # explicit: some tasks default to on
         if config["residual"]:
             parts += ["--residual", config["residual"]]
         if args.eval_freq is not None:
