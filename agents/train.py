@@ -368,12 +368,15 @@ def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None,
     }
 
 
-def ship(run_dir: Path, task: str) -> Path:
-    """Copy ``run_dir/best`` and the run's model card into ``agents/pretrained/<task>/``."""
+def ship(run_dir: Path, task: str, residual: str | None = None) -> Path:
+    """Copy ``run_dir/best`` and the run's model card into ``agents/pretrained/<task>/``
+    (``<task>_residual_<base>/`` for a residual agent, where ``policy_factory(variant=...)`` looks)."""
     from agents.checkpoints import copy_checkpoint
     from agents.policy import pretrained_path
 
     target = pretrained_path(task)
+    if residual:
+        target = target.with_name(f"{target.name}_residual_{residual}")
     copy_checkpoint(run_dir / "best", target)
     for name in ("model_card.json", "model_card.md"):
         (target / name).write_bytes((run_dir / name).read_bytes())
@@ -412,6 +415,6 @@ def run(args: argparse.Namespace) -> int:
           f"collisions {m['collisions']}")
     print(f"model card: {out / 'model_card.md'}")
     if args.ship:
-        target = ship(out, config["env_id"])
+        target = ship(out, config["env_id"], config["residual"])
         print(f"shipped to {target}")
     return 0

@@ -121,7 +121,7 @@ def test_residual_on_pid_if_available():
     assert climbed[-1, 2] > pid_alone[-1, 2] + 0.01
 
 
-def test_residual_agent_trains_saves_and_loads_on_pid(tmp_path):
+def test_residual_agent_trains_saves_and_loads_on_pid(tmp_path, monkeypatch):
     from agents import load_policy
     from agents.residual import make_base_controller
     from wall_inspector.cli import main
@@ -145,4 +145,17 @@ def test_residual_agent_trains_saves_and_loads_on_pid(tmp_path):
     base_action, _ = make_base_controller("pid", env).predict(obs)
     correction, _ = load_policy(out, env=env).correction.predict(np.concatenate([obs, base_action]).astype(np.float32))
     np.testing.assert_allclose(action, np.clip(base_action + 0.2 * np.clip(correction, -1, 1), -1, 1), atol=1e-6)
+    env.close()
+
+    # shipped beside the plain agent, where policy_factory(variant=...) finds it for each env
+    import agents.policy
+    from agents import policy_factory
+    from agents.train import ship
+
+    monkeypatch.setattr(agents.policy, "PRETRAINED_DIR", tmp_path / "pretrained")
+    assert ship(out, "WallHover", "pid") == tmp_path / "pretrained" / "wall_hover_residual_pid"
+    env = gym.make("WallInspector/WallHover-v0")
+    shipped = policy_factory(variant="residual_pid")(env)
+    assert isinstance(shipped, ResidualPolicy)
+    np.testing.assert_allclose(shipped.predict(obs)[0], action, atol=1e-6)
     env.close()
