@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -51,6 +52,23 @@ def split_evenly(n_items: int, n_parts: int) -> list[range]:
     return ranges
 
 
+class _WorkerFailure:
+    """Sent instead of a result when a worker's environment raised; carries the traceback."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+
+def _receive_all(remotes) -> list[Any]:
+    """One message from each remote (all of them, so the pipes stay in step), raising a
+    worker's failure as ``RuntimeError`` with its traceback."""
+    messages = [remote.recv() for remote in remotes]
+    for message in messages:
+        if isinstance(message, _WorkerFailure):
+            raise RuntimeError(f"an environment in a worker process failed:\n{message.text}")
+    return messages
+
+
 def _keep(info: dict[str, Any], keys: tuple[str, ...]) -> dict[str, Any]:
     return {k: info[k] for k in keys if k in info}
 
@@ -65,65 +83,80 @@ def _worker(remote, parent_remote, pickled_fns: bytes, info_keys: tuple[str, ...
         torch.set_num_threads(1)
     except ImportError:  # pragma: no cover - torch is a dependency, but the worker does not need it
         pass
-    envs: list[gym.Env] = [fn() for fn in cloudpickle.loads(pickled_fns)]
     keys = tuple(dict.fromkeys(_SB3_INFO_KEYS + info_keys))
+    envs: list[gym.Env] = []
+    try:
+        envs = [fn() for fn in cloudpickle.loads(pickled_fns)]
+    except Exception:  # noqa: BLE001 - report it to the parent instead of the spaces
+        remote.send(_WorkerFailure(traceback.format_exc()))
+        remote.close()
+        return
+    remote.send((envs[0].observation_space, envs[0].action_space, envs[0].render_mode))
     try:
         while True:
             command, data = remote.recv()
-            if command == "step":
-                n = len(envs)
-                obs_list, rewards, dones = [], np.empty(n, dtype=np.float32), np.empty(n, dtype=bool)
-                infos, reset_infos = [], []
-                for k, (env, action) in enumerate(zip(envs, data)):
-                    obs, reward, terminated, truncated, info = env.step(action)
-                    done = terminated or truncated
-                    info = _keep(info, keys)
-                    info["TimeLimit.truncated"] = bool(truncated and not terminated)
-                    reset_info: dict[str, Any] = {}
-                    if done:
-                        info["terminal_observation"] = obs
-                        obs, reset_info = env.reset()
-                        reset_info = _keep(reset_info, keys)
-                    obs_list.append(obs)
-                    rewards[k] = reward
-                    dones[k] = done
-                    infos.append(info)
-                    reset_infos.append(reset_info)
-                remote.send((np.stack(obs_list), rewards, dones, infos, reset_infos))
-            elif command == "reset":
-                out = []
-                for env, (seed, options) in zip(envs, data):
-                    obs, info = env.reset(seed=seed, **({"options": options} if options else {}))
-                    out.append((obs, _keep(info, keys)))
-                remote.send((np.stack([o for o, _ in out]), [i for _, i in out]))
-            elif command == "get_attr":
-                index, name = data
-                remote.send(envs[index].get_wrapper_attr(name))
-            elif command == "set_attr":
-                index, name, value = data
-                remote.send(envs[index].set_wrapper_attr(name, value))
-            elif command == "env_method":
-                index, name, args, kwargs = data
-                remote.send(envs[index].get_wrapper_attr(name)(*args, **kwargs))
-            elif command == "is_wrapped":
-                index, wrapper_class = data
-                from stable_baselines3.common.env_util import is_wrapped
-
-                remote.send(is_wrapped(envs[index], wrapper_class))
-            elif command == "render":
-                remote.send([env.render() for env in envs])
-            elif command == "spaces":
-                remote.send((envs[0].observation_space, envs[0].action_space, envs[0].render_mode))
-            elif command == "close":
+            try:
+                _answer(remote, envs, keys, command, data)
+            except StopIteration:
                 break
-            else:
-                raise NotImplementedError(f"unknown command {command!r}")
+            except Exception:  # noqa: BLE001 - the parent raises it with this traceback
+                remote.send(_WorkerFailure(traceback.format_exc()))
     except (KeyboardInterrupt, EOFError, BrokenPipeError):
         pass
     finally:
         for env in envs:
             env.close()
         remote.close()
+
+
+def _answer(remote, envs: list[gym.Env], keys: tuple[str, ...], command: str, data: Any) -> None:
+    """Carry out one command from the parent and send the result (``StopIteration`` on close)."""
+    if command == "step":
+        n = len(envs)
+        obs_list, rewards, dones = [], np.empty(n, dtype=np.float32), np.empty(n, dtype=bool)
+        infos, reset_infos = [], []
+        for k, (env, action) in enumerate(zip(envs, data)):
+            obs, reward, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+            info = _keep(info, keys)
+            info["TimeLimit.truncated"] = bool(truncated and not terminated)
+            reset_info: dict[str, Any] = {}
+            if done:
+                info["terminal_observation"] = obs
+                obs, reset_info = env.reset()
+                reset_info = _keep(reset_info, keys)
+            obs_list.append(obs)
+            rewards[k] = reward
+            dones[k] = done
+            infos.append(info)
+            reset_infos.append(reset_info)
+        remote.send((np.stack(obs_list), rewards, dones, infos, reset_infos))
+    elif command == "reset":
+        out = []
+        for env, (seed, options) in zip(envs, data):
+            obs, info = env.reset(seed=seed, **({"options": options} if options else {}))
+            out.append((obs, _keep(info, keys)))
+        remote.send((np.stack([o for o, _ in out]), [i for _, i in out]))
+    elif command == "get_attr":
+        index, name = data
+        remote.send(envs[index].get_wrapper_attr(name))
+    elif command == "set_attr":
+        index, name, value = data
+        remote.send(envs[index].set_wrapper_attr(name, value))
+    elif command == "env_method":
+        index, name, args, kwargs = data
+        remote.send(envs[index].get_wrapper_attr(name)(*args, **kwargs))
+    elif command == "is_wrapped":
+        index, wrapper_class = data
+        from stable_baselines3.common.env_util import is_wrapped
+
+        remote.send(is_wrapped(envs[index], wrapper_class))
+    elif command == "render":
+        remote.send([env.render() for env in envs])
+    elif command == "close":
+        raise StopIteration
+    else:
+        raise NotImplementedError(f"unknown command {command!r}")
 
 
 class MultiEnvSubprocVecEnv(VecEnv):
@@ -165,8 +198,15 @@ class MultiEnvSubprocVecEnv(VecEnv):
             work_remote.close()
             self.remotes.append(remote)
             self.processes.append(process)
-        self.remotes[0].send(("spaces", None))
-        observation_space, action_space, render_mode = self.remotes[0].recv()
+        try:  # each worker first reports its spaces, or why it could not build its environments
+            observation_space, action_space, render_mode = _receive_all(self.remotes)[0]
+        except (RuntimeError, EOFError, BrokenPipeError):
+            self.closed = True
+            for process in self.processes:
+                process.join(timeout=5)
+                if process.is_alive():
+                    process.terminate()
+            raise
         super().__init__(n_envs, observation_space, action_space)
         self.render_mode = render_mode
         self.n_workers = n_workers
@@ -180,8 +220,8 @@ class MultiEnvSubprocVecEnv(VecEnv):
         self.waiting = True
 
     def step_wait(self) -> VecEnvStepReturn:
-        results = [remote.recv() for remote in self.remotes]
         self.waiting = False
+        results = _receive_all(self.remotes)
         obs = np.concatenate([r[0] for r in results])
         rewards = np.concatenate([r[1] for r in results])
         dones = np.concatenate([r[2] for r in results])
@@ -192,7 +232,7 @@ class MultiEnvSubprocVecEnv(VecEnv):
     def reset(self):
         for remote, part in zip(self.remotes, self._slices):
             remote.send(("reset", [(self._seeds[i], self._options[i]) for i in part]))
-        results = [remote.recv() for remote in self.remotes]
+        results = _receive_all(self.remotes)
         self.reset_infos = [info for r in results for info in r[1]]
         self._reset_seeds()
         self._reset_options()
@@ -227,7 +267,7 @@ class MultiEnvSubprocVecEnv(VecEnv):
         for i in self._get_indices(indices):
             remote, local = self._locate(i)
             remote.send(make_message(local))
-            out.append(remote.recv())
+            out.append(_receive_all([remote])[0])
         return out
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
@@ -246,6 +286,6 @@ class MultiEnvSubprocVecEnv(VecEnv):
         images = []
         for remote in self.remotes:
             remote.send(("render", None))
-        for remote in self.remotes:
-            images.extend(remote.recv())
+        for result in _receive_all(self.remotes):
+            images.extend(result)
         return images

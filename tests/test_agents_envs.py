@@ -118,3 +118,30 @@ def test_multi_env_workers_match_one_process_step_for_step():
     finally:
         reference.close()
         workers.close()
+
+
+def _broken_env():
+    raise ValueError("this environment cannot be built")
+
+
+def _env_that_fails_on_step():
+    import gymnasium as gym
+
+    class Failing(gym.Wrapper):
+        def step(self, action):
+            raise FloatingPointError("the simulator blew up")
+
+    return Failing(gym.make("WallInspector/WallHover-v0"))
+
+
+def test_worker_failures_reach_the_parent_with_their_cause():
+    with pytest.raises(RuntimeError, match="this environment cannot be built"):
+        MultiEnvSubprocVecEnv([_broken_env, _broken_env], n_workers=2)
+    venv = MultiEnvSubprocVecEnv([_env_that_fails_on_step] * 2, n_workers=1)
+    try:
+        venv.reset()
+        with pytest.raises(RuntimeError, match="the simulator blew up"):
+            venv.step(np.zeros((2, 4), dtype=np.float32))
+        assert venv.get_attr("task")[0].name == "WallHover"  # the worker is still answering
+    finally:
+        venv.close()
