@@ -270,7 +270,7 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
         ("seed", training.get("seed")),
         ("machine", training.get("machine")),
         ("git commit", training.get("git_commit")),
-        ("checkpoint shipped", card.get("checkpoint")),
+        ("checkpoint evaluated below (the one to ship)", card.get("checkpoint")),
     ]
     lines += [f"| {name} | {_fmt(value)} |" for name, value in rows]
     lines += ["", "## Evaluation", "", evaluation.get("scenario", ""), ""]
