@@ -86,13 +86,15 @@ def _resolve(source: str | Path) -> Path:
     return folder
 
 
-def load_policy(source: str | Path, env=None, verify: bool = True):
+def load_policy(source: str | Path, env=None, verify: bool = True, base_kwargs: dict[str, Any] | None = None):
     """Load a trained agent.
 
     ``source``: a task name (``"WallSweep-v0"``, ``"WallInspector/WallSweep-v0"``) for the
     shipped checkpoint, a checkpoint folder (a run folder, its ``best/``, a pretrained
     folder) or the ``model.zip`` inside one. ``env``: needed only for residual agents, to
-    build the base controller. ``verify``: recompute the actions recorded at save time.
+    build the base controller; ``base_kwargs`` replace the saved keywords of that base
+    (e.g. the true ``k_s``/``d_thr`` for SC-MPC). ``verify``: recompute the actions
+    recorded at save time.
     """
     folder = _resolve(source)
     model, normalization, info = load_model(folder, verify=verify)
@@ -105,8 +107,10 @@ def load_policy(source: str | Path, env=None, verify: bool = True):
                          "load_policy can build the base controller for that environment")
     from agents.residual import ResidualPolicy, make_base_controller
 
-    base = make_base_controller(residual["base"], env, **residual.get("base_kwargs", {}))
-    return ResidualPolicy(base, policy, residual["scale"], name=f"PPO residual on {residual['base']}")
+    kwargs = {**residual.get("base_kwargs", {}), **(base_kwargs or {})}
+    base = make_base_controller(residual["base"], env, **kwargs)
+    return ResidualPolicy(base, policy, residual["scale"], name=f"PPO residual on {residual['base']}",
+                          base_name=residual["base"])
 
 
 def _env_task(env) -> str:
@@ -127,11 +131,13 @@ def policy_factory(source: str | Path | None = None, *, variant: str = "", verif
         policies = {**paper_policies(), "PPO": agents.policy_factory()}
 
     Checkpoints are read once per source; a residual agent gets a fresh base controller
-    for every env.
+    for every env. When the table passes its scenario (``factory(env, scenario)``), a
+    residual agent's SC-MPC base is told the scenario's ``k_s`` and ``d_thr``, as the
+    table's own SC-MPC is.
     """
     cache: dict[Path, Any] = {}
 
-    def factory(env):
+    def factory(env, scenario=None):
         if source is not None:
             folder = _resolve(source)
         else:
@@ -143,7 +149,11 @@ def policy_factory(source: str | Path | None = None, *, variant: str = "", verif
         loaded = cache[folder]
         if isinstance(loaded, TrainedPolicy):
             return loaded
-        return load_policy(folder, env=env, verify=False)  # residual: the base controller belongs to this env
+        base_kwargs = None
+        if scenario is not None and loaded.base_name == "scmpc":
+            base_kwargs = {"k_s": float(scenario.k_s), "d_thr": float(scenario.d_thr)}
+        # residual: the base controller belongs to this env
+        return load_policy(folder, env=env, verify=False, base_kwargs=base_kwargs)
 
     factory.__name__ = f"ppo_policy_factory({source or 'shipped'}{', ' + variant if variant else ''})"
     return factory

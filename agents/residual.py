@@ -138,8 +138,10 @@ class ResidualPolicy:
     action. The base controller's recurrent state travels in ``state``.
     """
 
-    def __init__(self, base: Any, correction: Any, scale: float | np.ndarray, name: str = "residual"):
+    def __init__(self, base: Any, correction: Any, scale: float | np.ndarray, name: str = "residual",
+                 base_name: str | None = None):
         self.base = base
+        self.base_name = base_name  # "pid" or "scmpc" when loaded from a checkpoint
         self.correction = correction
         self.scale = np.broadcast_to(np.asarray(scale, dtype=np.float64), (4,)).copy()
         self.name = name

@@ -159,3 +159,25 @@ def test_residual_agent_trains_saves_and_loads_on_pid(tmp_path, monkeypatch):
     assert isinstance(shipped, ResidualPolicy)
     np.testing.assert_allclose(shipped.predict(obs)[0], action, atol=1e-6)
     env.close()
+
+    # in a comparison table, an SC-MPC base is told the scenario's suction, like the table's SC-MPC
+    import json
+    import shutil
+
+    import agents.residual
+    from controllers.paper_tables import TABLE_I
+
+    scmpc_dir = tmp_path / "as_scmpc"
+    shutil.copytree(out / "best", scmpc_dir)
+    info = json.loads((scmpc_dir / "policy.json").read_text())
+    info["residual"].update(base="scmpc", base_kwargs={"k_s": 4.1, "d_thr": 0.132})
+    (scmpc_dir / "policy.json").write_text(json.dumps(info))
+    built = []
+    monkeypatch.setattr(agents.residual, "make_base_controller",
+                        lambda name, env, **kw: built.append((name, kw)) or LinearBase())
+    env = gym.make("WallInspector/WallCircle-v0")
+    factory = policy_factory(scmpc_dir)
+    factory(env, TABLE_I[2])
+    factory(env)
+    env.close()
+    assert built[-2:] == [("scmpc", {"k_s": 10.0, "d_thr": 0.10}), ("scmpc", {"k_s": 4.1, "d_thr": 0.132})]
