@@ -286,6 +286,12 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                                   eval_freq=max(int(config["eval"]["freq"]) // config["n_envs"], 1),
                                   log_path=str(out / "eval"), deterministic=True, verbose=verbose)
         evaluation.best_mean_reward = best_so_far
+        history_file = out / "eval" / "evaluations.npz"
+        if resume and history_file.is_file():  # keep the earlier evaluations: EvalCallback rewrites the file
+            with np.load(history_file) as history:
+                evaluation.evaluations_timesteps = [int(t) for t in history["timesteps"]]
+                evaluation.evaluations_results = [list(r) for r in history["results"]]
+                evaluation.evaluations_length = [list(n) for n in history["ep_lengths"]]
         callbacks = [evaluation, CollisionLog()]
         if int(config["checkpoint_freq"]) > 0:
             callbacks.append(PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks))

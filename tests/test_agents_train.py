@@ -104,6 +104,8 @@ def test_resume_continues_from_the_latest_checkpoint(cli_run, tmp_path):
     card = json.loads((run / "model_card.json").read_text())
     assert card["training"]["resumed"] and card["training"]["timesteps_this_run"] == 2048
     assert card["training"]["total_wall_time_s"] > card["training"]["wall_time_s"]
+    # the evaluation history spans both parts of the run
+    assert [row[0] for row in card["training"]["eval_curve"]] == [1024, 2048, 3072, 4096, 5120]
     with pytest.raises(SystemExit, match="drop --seed"):
         main(["train", "--resume", str(run), "--timesteps", "9000", "--seed", "1"])
 
