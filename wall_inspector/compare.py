@@ -1,13 +1,18 @@
-"""``wall-inspector compare``: the paper's Tables I and II in simulation, with PID, MPC and SC-MPC.
+"""``wall-inspector compare``: the paper's Tables I and II in simulation, with PID, MPC, SC-MPC and PPO.
 
 Flies every method on the scenarios of :mod:`controllers.paper_tables` (a progress
-bar counts the flights), prints the Markdown tables and the issue's acceptance
-checks, and writes to ``--out``:
+bar counts the flights), prints the Markdown tables and the acceptance checks, and
+writes to ``--out``:
 
 - ``tables.md``: the tables (``wall-inspector readme --set compare=OUT/tables.md``
   copies them into the README);
 - ``results.json``: pooled and per-flight metrics of every run and the checks;
 - ``table_i_circle.png`` (paper Fig. 6) and ``table_ii_sweep.png`` (paper Fig. 10).
+
+The shipped PPO agents (``agents/pretrained``) fly through the same evaluation
+function and seeds: the circle agent in Table I, the sweep agent in Table II, and in
+Table II also the residual agent that corrects SC-MPC ("PPO + SC-MPC"; its SC-MPC base
+keeps the weights it was trained with). ``--no-ppo`` leaves them out.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mpc-sigma", action="append", default=[], metavar="NAME=V[/V...]",
                         help="replace one of the MPCs' sigmas (both MPC and SC-MPC), e.g. position=0.07/0.07/0.093; "
                              "names are the fields of controllers.mpc.MPCWeights (sensitivity studies, not the paper)")
+    parser.add_argument("--no-ppo", action="store_true", help="leave out the shipped PPO agents")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
@@ -66,6 +72,32 @@ def _weights(preset: str, items: list[str]):
     return weights, " ".join(filter(None, [base_note, note]))
 
 
+def _ppo_policies(env_id: str, residual: bool) -> dict:
+    """The shipped agents for ``env_id``'s task (and its SC-MPC residual agent), if shipped."""
+    from agents import policy_factory, pretrained_path
+
+    task = env_id.split("/")[-1]
+    policies = {}
+    if pretrained_path(task).is_dir():
+        policies["PPO"] = policy_factory()
+    else:
+        print(f"no shipped PPO agent for {task} ({pretrained_path(task)}): PPO left out")
+    residual_folder = pretrained_path(task).with_name(pretrained_path(task).name + "_residual_scmpc")
+    if residual and residual_folder.is_dir():
+        policies["PPO + SC-MPC"] = policy_factory(variant="residual_scmpc")
+    return policies
+
+
+def _ppo_acceptance(results) -> list[dict]:
+    """Issue 4: the shipped sweep agent has at most one collision in the Table II scenario."""
+    for r in results:
+        if r.scenario.table == "II" and r.policy == "PPO":
+            m = r.metrics()
+            return [{"check": "Table II: PPO has at most 1 collision (contact steps)", "value": m["collisions"],
+                     "pass": m["collisions"] <= 1}]
+    return []
+
+
 def run(args: argparse.Namespace) -> int:
     from controllers import paper_tables as pt
 
@@ -84,11 +116,17 @@ def run(args: argparse.Namespace) -> int:
         scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_ii)), env_kwargs=extra) for s in pt.TABLE_II]
     weights, note = _weights(args.weights, args.mpc_sigma)
     t0 = time.perf_counter()
-    results = pt.run_scenarios(scenarios, pt.paper_policies(weights), progress=not args.no_progress)
+    policies = pt.paper_policies(weights)
+    results = []
+    for table in ("I", "II"):
+        chosen = [s for s in scenarios if s.table == table]
+        if chosen:
+            extra = {} if args.no_ppo else _ppo_policies(chosen[0].env_id, residual=table == "II")
+            results += pt.run_scenarios(chosen, {**policies, **extra}, progress=not args.no_progress)
     paths = pt.write_outputs(results, args.out, note)
     print(pt.markdown_tables(results, note))
-    print("Acceptance (issue 3):")
-    for check in pt.acceptance(results):
+    print("Acceptance:")
+    for check in pt.acceptance(results) + _ppo_acceptance(results):
         print(f"  [{'PASS' if check['pass'] else 'FAIL'}] {check['check']}: {check['value']:.3g}")
     print(f"{len(results)} runs in {time.perf_counter() - t0:.0f} s; wrote " + ", ".join(str(p) for p in paths.values()))
     return 0
