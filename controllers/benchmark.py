@@ -57,6 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--high-priority", action="store_true",
                         help="run the SC-MPC solves with real-time FIFO scheduling (needs the permission) so that "
                              "other processes on a shared machine do not preempt them, as on a flight computer")
+    parser.add_argument("--markdown", metavar="FILE", help="write the figures as a Markdown table to FILE")
     parser.add_argument("--json", metavar="FILE", help="write the figures to FILE")
 
 
@@ -213,4 +214,29 @@ def run(args: argparse.Namespace) -> int:
         with open(args.json, "w") as fh:
             json.dump(figures, fh, indent=2)
         print(f"wrote {args.json}")
+    if args.markdown:
+        with open(args.markdown, "w") as fh:
+            fh.write(markdown(figures))
+        print(f"wrote {args.markdown}")
     return 0 if all(checks.values()) else 1
+
+
+def markdown(figures: dict) -> str:
+    """The figures as a Markdown table (for ``wall-inspector readme``)."""
+    rows = [("SC-MPC, Levenberg-Marquardt (wall clock)", figures["lm_solve_ms"]),
+            ("SC-MPC, Levenberg-Marquardt (CPU time)", figures["lm_solve_cpu_ms"])]
+    if "ipopt_solve_ms" in figures:
+        rows.append(("same problems, CasADi + IPOPT", figures["ipopt_solve_ms"]))
+    lines = ["| solver | median (ms) | p99 (ms) | p99.8 (ms) | max (ms) |", "|---|---:|---:|---:|---:|"]
+    lines += [f"| {name} | {s['median']:.3f} | {s['p99']:.3f} | {s['p99_8']:.3f} | {s['max']:.3f} |" for name, s in rows]
+    lines.append("")
+    text = (f"{figures['steps']:,} closed-loop control steps of `{ENV_ID}` (k_s 4.1 N/m, d_thr 0.132 m, command noise), "
+            f"{figures['lm_iterations_mean']:.1f} LM iterations per solve on average, "
+            f"{'pinned to one core' if figures['machine']['pinned_core'] is not None else 'not pinned'}, "
+            f"{figures['priority']}.")
+    if "ipopt_solve_ms" in figures:
+        gap = figures["cost_gap"]
+        text += (f" IPOPT takes {figures['speedup_median']:.0f}x longer (median); the LM cost is within 1 % of "
+                 f"IPOPT's optimum on {100 * gap['share_within_1pct']:.1f} % of the steps (largest gap {gap['max']:.1e}).")
+    lines.append(text + " Measured by `wall-inspector bench-mpc`.")
+    return "\n".join(lines) + "\n"

@@ -194,7 +194,8 @@ def test_compare_with_the_tuned_weights_uses_them_and_says_so(tmp_path):
 
 def test_bench_mpc_command_reports_and_checks(tmp_path, capsys):
     path = tmp_path / "bench.json"
-    code = cli_main(["bench-mpc", "--steps", "60", "--no-pin", "--json", str(path)])
+    table = tmp_path / "bench.md"
+    code = cli_main(["bench-mpc", "--steps", "60", "--no-pin", "--json", str(path), "--markdown", str(table)])
     assert code == 1  # fewer than 2000 steps can never pass
     figures = json.loads(path.read_text())
     assert figures["steps"] == 60 and figures["lm_solve_ms"]["count"] == 60
@@ -202,3 +203,6 @@ def test_bench_mpc_command_reports_and_checks(tmp_path, capsys):
     assert figures["cost_gap"]["share_within_1pct"] == 1.0
     assert figures["targets"]["steps >= 2000"] is False
     assert "IPOPT / LM median time" in capsys.readouterr().out
+    text = table.read_text()
+    assert "| SC-MPC, Levenberg-Marquardt (wall clock) |" in text and "same problems, CasADi + IPOPT" in text
+    assert f"{figures['lm_solve_ms']['median']:.3f}" in text
