@@ -188,7 +188,7 @@ class BulletWorld:
         if np.linalg.norm(total) > 0.5:
             n = total / np.linalg.norm(total)
             along = np.cross(up, n)
-            return target + 1.1 * n + 0.9 * along + 0.35 * up
+            return target + 0.6 * n + 1.1 * along + 0.25 * up
         along = np.cross(normals[0], up)
         return target - 1.3 * along / np.linalg.norm(along) + 0.3 * up
 
