@@ -1,8 +1,9 @@
 """``wall-inspector readme``: put result tables that commands wrote into README.md.
 
-Result commands write Markdown files (``bench-env --markdown``, ``compare --out``);
-this command copies them between markers in the README, so no figure in the README
-is typed by hand::
+Result commands write Markdown files (``bench-env --markdown``, ``bench-mpc
+--markdown``, ``compare --out``); this command copies them between markers in the
+README, and ``--agents`` tabulates the model cards that ``train --ship`` wrote, so no
+figure in the README is typed by hand::
 
     <!-- BEGIN bench-env -->
     ...replaced...
@@ -12,6 +13,7 @@ is typed by hand::
 from __future__ import annotations
 
 import argparse
+import json
 import re
 from pathlib import Path
 
@@ -23,10 +25,34 @@ def replace_block(text: str, name: str, content: str) -> str:
     return pattern.sub(lambda m: m.group(1) + content.rstrip() + "\n" + m.group(3), text)
 
 
+def agents_table(pretrained: Path) -> str:
+    """One row per shipped agent, from its ``model_card.json``."""
+    lines = [
+        "| agent | timesteps | training wall time | env steps/s (2 processes) | episodes completed | "
+        "position RMSE | wall-normal RMSE | contact steps |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for card_path in sorted(pretrained.glob("*/model_card.json")):
+        card = json.loads(card_path.read_text())
+        t, m = card["training"], card["evaluation"]["metrics"]
+        name = card["env_id"].split("/")[-1] + (f" + residual on {card['residual']}" if card.get("residual") else "")
+        lines.append(
+            f"| [`{name}`]({card_path.parent.as_posix()}/model_card.md) | {t['total_timesteps']:,} | "
+            f"{t['total_wall_time_s'] / 60:.1f} min | {t['steps_per_s']:,.0f} | {100 * m['completed']:.0f} % | "
+            f"{100 * m['position_rmse_m']:.2f} cm | {100 * m['wall_normal_rmse_m']:.2f} cm | {m['collisions']} |")
+    seeds = {len(json.loads(p.read_text())["evaluation"]["seeds"]) for p in pretrained.glob("*/model_card.json")}
+    lines += ["", f"From each agent's model card: trained by `wall-inspector train ... --ship` on this 2-core machine "
+              f"(the card holds the exact command), evaluated on the task's nominal settings with command noise "
+              f"over {'/'.join(str(n) for n in sorted(seeds))} seeds by the evaluation function of the comparison tables."]
+    return "\n".join(lines) + "\n"
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--readme", default="README.md", help="the README to update (default README.md)")
     parser.add_argument("--set", dest="blocks", action="append", default=[], metavar="NAME=FILE",
                         help="replace block NAME with the Markdown in FILE (repeatable)")
+    parser.add_argument("--agents", action="store_true",
+                        help="replace block 'agents' with a table of the shipped agents' model cards")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,5 +64,11 @@ def run(args: argparse.Namespace) -> int:
             raise SystemExit(f"--set takes NAME=FILE, got {item!r}")
         text = replace_block(text, name, Path(file).read_text())
         print(f"{path}: block {name!r} <- {file}")
+    if args.agents:
+        from agents.policy import PRETRAINED_DIR
+
+        text = replace_block(text, "agents", agents_table(PRETRAINED_DIR.relative_to(Path.cwd())
+                                                          if PRETRAINED_DIR.is_relative_to(Path.cwd()) else PRETRAINED_DIR))
+        print(f"{path}: block 'agents' <- {PRETRAINED_DIR}/*/model_card.json")
     path.write_text(text)
     return 0

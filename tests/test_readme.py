@@ -1,0 +1,41 @@
+"""The readme command puts command-written tables between markers, and tabulates model cards."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from wall_inspector.cli import main
+from wall_inspector.readme import agents_table, replace_block
+
+
+def test_a_block_is_replaced_and_the_rest_kept():
+    text = "intro\n<!-- BEGIN speed -->\nold\n<!-- END speed -->\noutro\n"
+    assert replace_block(text, "speed", "| a |\n") == "intro\n<!-- BEGIN speed -->\n| a |\n<!-- END speed -->\noutro\n"
+    with pytest.raises(ValueError, match="README has no block '<!-- BEGIN other -->'"):
+        replace_block(text, "other", "x")
+
+
+def test_the_command_copies_a_file_into_the_readme(tmp_path):
+    readme = tmp_path / "README.md"
+    readme.write_text("<!-- BEGIN bench-env -->\nplaceholder\n<!-- END bench-env -->\n")
+    table = tmp_path / "bench.md"
+    table.write_text("| env | steps/s |\n|---|---|\n| x | 10 |\n")
+    assert main(["readme", "--readme", str(readme), "--set", f"bench-env={table}"]) == 0
+    assert readme.read_text() == "<!-- BEGIN bench-env -->\n| env | steps/s |\n|---|---|\n| x | 10 |\n<!-- END bench-env -->\n"
+
+
+def test_model_cards_become_one_row_each(tmp_path):
+    card = {
+        "env_id": "WallInspector/WallSweep-v0", "residual": None,
+        "training": {"total_timesteps": 10_000_000, "total_wall_time_s": 1500.0, "steps_per_s": 6700.0},
+        "evaluation": {"seeds": list(range(10)), "metrics": {
+            "completed": 1.0, "position_rmse_m": 0.031, "wall_normal_rmse_m": 0.0281, "collisions": 0}},
+    }
+    (tmp_path / "wall_sweep").mkdir()
+    (tmp_path / "wall_sweep" / "model_card.json").write_text(json.dumps(card))
+    text = agents_table(tmp_path)
+    row = [line for line in text.splitlines() if "WallSweep-v0" in line][0]
+    assert "| 10,000,000 | 25.0 min | 6,700 | 100 % | 3.10 cm | 2.81 cm | 0 |" in row
+    assert "over 10 seeds" in text
