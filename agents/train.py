@@ -50,7 +50,6 @@ from agents.config import (
     load_config,
     save_config,
     task_env_id,
-    task_slug,
 )
 
 __all__ = ["add_arguments", "run", "train", "TrainingRun", "check_observations", "policy_description"]

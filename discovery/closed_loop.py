@@ -16,7 +16,6 @@ it (its ``effects`` are what the simulated world contains, e.g. the discovered o
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -24,19 +23,14 @@ import numpy as np
 
 from discovery.fly import prepare_flight
 from wall_env.model_file import FlightModel
+from wall_env.validation import read_json_object
 
 __all__ = ["load_scenario", "closed_loop_check"]
 
 
 def load_scenario(path: str | Path) -> dict[str, Any]:
     """A scenario record as written by ``wall-inspector fly``."""
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise FileNotFoundError(f"scenario file {path} does not exist") from None
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"scenario file {path} is not valid JSON: {exc}") from None
+    data = read_json_object(path, "scenario file")
     missing = sorted({"env_id", "env_kwargs", "effects"} - set(data))
     if missing:
         raise ValueError(f"scenario file {path} lacks {missing}")

@@ -25,6 +25,7 @@ import numpy as np
 
 from wall_env.aero import AeroModel
 from wall_env.effects import Effect, effects_from_spec, make_effect
+from wall_env.validation import read_json_object
 from wall_env.vehicle import VehicleParams
 
 __all__ = ["FlightModel", "nominal_aero_model"]
@@ -80,16 +81,7 @@ class FlightModel:
 
     @classmethod
     def load(cls, path: str | Path) -> FlightModel:
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise FileNotFoundError(f"model file {path} does not exist") from None
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"model file {path} is not valid JSON: {exc}") from None
-        if not isinstance(data, dict):
-            raise ValueError(f"model file {path} must hold a JSON object")
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(read_json_object(path, "model file"), source=str(path))
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2))

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["check_range", "check_positive", "check_vector", "check_finite_array"]
+__all__ = ["check_range", "check_positive", "check_vector", "check_finite_array", "read_json_object"]
 
 
 def _as_float(name: str, value: Any) -> float:
@@ -64,3 +66,17 @@ def check_finite_array(name: str, value: Any, shape: tuple[int, ...]) -> np.ndar
     if not np.all(np.isfinite(array)):
         raise ValueError(f"{name} must be finite (no NaN or inf), got {array.tolist()}")
     return array
+
+
+def read_json_object(path: str | Path, kind: str) -> dict[str, Any]:
+    """The JSON object in ``path``; errors say which ``kind`` of file (e.g. "model file") is wrong."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{kind} {path} does not exist") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{kind} {path} is not valid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{kind} {path} must hold a JSON object")
+    return data
