@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     for name, log in logs.items():
         ax_plot.plot(log["time"], 100 * log["x"], lw=1, label=name)
     contact_distance = 100 * (0.1 / np.sqrt(2) + wall_env.VehicleParams().duct_radius)
-    ax_plot.axhline(contact_distance, color="r", lw=0.8, label="ducts touch the wall")
+    ax_plot.axhline(contact_distance, color="0.3", ls=":", lw=1.2, label="ducts touch the wall")
     ax_plot.set_xlabel("time (s)")
     ax_plot.set_ylabel("centre of mass to wall (cm)")
     ax_plot.set_title("the paper's wall sweep (Fig. 10), wall-normal axis")
