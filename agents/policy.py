@@ -66,9 +66,13 @@ class TrainedPolicy:
         return f"TrainedPolicy({self.env_id}, {self.path})"
 
 
-def pretrained_path(task: str) -> Path:
-    """Folder of the shipped checkpoint for ``task`` (it may not exist)."""
-    return PRETRAINED_DIR / task_slug(task)
+def pretrained_path(task: str, variant: str = "") -> Path:
+    """Folder of the shipped checkpoint for ``task`` (it may not exist).
+
+    ``variant`` names a second agent of the same task, e.g. ``"residual_scmpc"`` for the
+    residual agent on top of SC-MPC: ``agents/pretrained/<task_slug>_<variant>/``.
+    """
+    return PRETRAINED_DIR / (task_slug(task) + (f"_{variant}" if variant else ""))
 
 
 def _resolve(source: str | Path) -> Path:
@@ -141,7 +145,7 @@ def policy_factory(source: str | Path | None = None, *, variant: str = "", verif
         if source is not None:
             folder = _resolve(source)
         else:
-            folder = PRETRAINED_DIR / (task_slug(_env_task(env)) + (f"_{variant}" if variant else ""))
+            folder = pretrained_path(_env_task(env), variant)
             if not folder.is_dir():
                 raise CheckpointNotFoundError(f"no shipped agent for {_env_task(env)}: {folder} does not exist")
         if folder not in cache:

@@ -379,9 +379,7 @@ def ship(run_dir: Path, task: str, residual: str | None = None) -> Path:
     from agents.checkpoints import copy_checkpoint
     from agents.policy import pretrained_path
 
-    target = pretrained_path(task)
-    if residual:
-        target = target.with_name(f"{target.name}_residual_{residual}")
+    target = pretrained_path(task, f"residual_{residual}" if residual else "")
     copy_checkpoint(run_dir / "best", target)
     for name in ("model_card.json", "model_card.md"):
         (target / name).write_bytes((run_dir / name).read_bytes())

@@ -82,8 +82,7 @@ def _ppo_policies(env_id: str, residual: bool) -> dict:
         policies["PPO"] = policy_factory()
     else:
         print(f"no shipped PPO agent for {task} ({pretrained_path(task)}): PPO left out")
-    residual_folder = pretrained_path(task).with_name(pretrained_path(task).name + "_residual_scmpc")
-    if residual and residual_folder.is_dir():
+    if residual and pretrained_path(task, "residual_scmpc").is_dir():
         policies["PPO + SC-MPC"] = policy_factory(variant="residual_scmpc")
     return policies
 
