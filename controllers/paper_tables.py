@@ -40,7 +40,7 @@ from controllers.pid import PID
 
 __all__ = [
     "Scenario", "ScenarioResult", "TABLE_I", "TABLE_II", "TABLE_I_SEEDS", "TABLE_II_SEEDS", "PAPER_VALUES",
-    "paper_policies", "run_scenarios", "markdown_tables", "acceptance", "write_outputs",
+    "paper_policies", "run_scenarios", "markdown_tables", "acceptance", "markdown_checks", "write_outputs",
 ]
 
 TABLE_I_SEEDS = tuple(range(5))
@@ -298,16 +298,27 @@ def _plot_table_ii(results: Sequence[ScenarioResult], path: Path, seed_index: in
     fig.savefig(path, dpi=110)
 
 
-def write_outputs(results: Sequence[ScenarioResult], out_dir: str | Path, note: str = "") -> dict[str, Path]:
+def markdown_checks(checks: Sequence[dict[str, Any]]) -> str:
+    """The acceptance checks as a Markdown list: verdict, check, measured value."""
+    lines = ["Acceptance checks, as measured by this run:", ""]
+    lines += [f"- {'pass' if c['pass'] else '**FAIL**'}: {c['check']} (measured {c['value']:.3g})" for c in checks]
+    return "\n".join(lines) + "\n"
+
+
+def write_outputs(results: Sequence[ScenarioResult], out_dir: str | Path, note: str = "",
+                  extra_checks: Sequence[dict[str, Any]] = ()) -> dict[str, Path]:
     """Write ``tables.md``, ``results.json`` and the figures to ``out_dir``; return their paths.
 
-    ``note`` heads the Markdown and is stored in the JSON (e.g. non-default MPC weights).
+    ``note`` heads the Markdown and is stored in the JSON (e.g. non-default MPC weights);
+    ``extra_checks`` (same form as :func:`acceptance`'s) follow the paper's checks in both.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"markdown": out / "tables.md", "json": out / "results.json"}
-    paths["markdown"].write_text(markdown_tables(results, note))
-    paths["json"].write_text(json.dumps({"note": note, **results_json(results)}, indent=2, default=float))
+    checks = acceptance(results) + list(extra_checks)
+    paths["markdown"].write_text(markdown_tables(results, note) + "\n" + markdown_checks(checks))
+    paths["json"].write_text(json.dumps({"note": note, **results_json(results), "acceptance": checks},
+                                        indent=2, default=float))
     table_i = [r for r in results if r.scenario.table == "I"]
     table_ii = [r for r in results if r.scenario.table == "II"]
     if table_i:

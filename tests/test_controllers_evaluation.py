@@ -155,7 +155,11 @@ def test_compare_command_writes_its_outputs(tmp_path, capsys):
                      "--no-progress"])
     assert code == 0
     out = capsys.readouterr().out
-    assert "Acceptance:" in out and "**Table II**" in out
+    assert "Acceptance checks" in out and "**Table II**" in out
+    # the PPO check of issue 4 sits with the paper's in both the Markdown and the JSON
+    checks = json.loads((tmp_path / "results.json").read_text())["acceptance"]
+    assert checks[-1]["check"].startswith("Table II: PPO")
+    assert sum(line.startswith("- ") for line in (tmp_path / "tables.md").read_text().splitlines()) == len(checks) == 6
     assert {p.name for p in tmp_path.iterdir()} == {"tables.md", "results.json", "table_i_circle.png",
                                                    "table_ii_sweep.png"}
     with pytest.raises(SystemExit):

@@ -122,10 +122,7 @@ def run(args: argparse.Namespace) -> int:
         if chosen:
             extra = {} if args.no_ppo else _ppo_policies(chosen[0].env_id, residual=table == "II")
             results += pt.run_scenarios(chosen, {**policies, **extra}, progress=not args.no_progress)
-    paths = pt.write_outputs(results, args.out, note)
-    print(pt.markdown_tables(results, note))
-    print("Acceptance:")
-    for check in pt.acceptance(results) + _ppo_acceptance(results):
-        print(f"  [{'PASS' if check['pass'] else 'FAIL'}] {check['check']}: {check['value']:.3g}")
+    paths = pt.write_outputs(results, args.out, note, extra_checks=_ppo_acceptance(results))
+    print(paths["markdown"].read_text())
     print(f"{len(results)} runs in {time.perf_counter() - t0:.0f} s; wrote " + ", ".join(str(p) for p in paths.values()))
     return 0
