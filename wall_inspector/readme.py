@@ -25,6 +25,9 @@ def replace_block(text: str, name: str, content: str) -> str:
     return pattern.sub(lambda m: m.group(1) + content.rstrip() + "\n" + m.group(3), text)
 
 
+_BASE_NAMES = {"scmpc": "SC-MPC", "pid": "PID"}
+
+
 def agents_table(pretrained: Path) -> str:
     """One row per shipped agent, from its ``model_card.json``."""
     lines = [
@@ -35,9 +38,11 @@ def agents_table(pretrained: Path) -> str:
     for card_path in sorted(pretrained.glob("*/model_card.json")):
         card = json.loads(card_path.read_text())
         t, m = card["training"], card["evaluation"]["metrics"]
-        name = card["env_id"].split("/")[-1] + (f" + residual on {card['residual']}" if card.get("residual") else "")
+        name = f"`{card['env_id'].split('/')[-1]}`"
+        if card.get("residual"):
+            name += f", residual on {_BASE_NAMES.get(card['residual'], card['residual'])}"
         lines.append(
-            f"| [`{name}`]({card_path.parent.as_posix()}/model_card.md) | {t['total_timesteps']:,} | "
+            f"| [{name}]({card_path.parent.as_posix()}/model_card.md) | {t['total_timesteps']:,} | "
             f"{t['total_wall_time_s'] / 60:.1f} min | {t['steps_per_s']:,.0f} | {100 * m['completed']:.0f} % | "
             f"{100 * m['position_rmse_m']:.2f} cm | {100 * m['wall_normal_rmse_m']:.2f} cm | {m['collisions']} |")
     seeds = {len(json.loads(p.read_text())["evaluation"]["seeds"]) for p in pretrained.glob("*/model_card.json")}
