@@ -22,6 +22,7 @@ from typing import Any
 import yaml
 
 from wall_env.tasks import TASKS
+from wall_env.validation import read_mapping
 
 __all__ = [
     "CONFIG_DIR",
@@ -131,14 +132,7 @@ def default_config(task: str) -> dict[str, Any]:
 def load_config(path: str | Path, validate: bool = True) -> dict[str, Any]:
     """Shared defaults overridden by the YAML file at ``path``."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except FileNotFoundError:
-        raise FileNotFoundError(f"configuration file {path} does not exist") from None
-    except yaml.YAMLError as exc:
-        raise ValueError(f"configuration file {path} is not valid YAML: {exc}") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"configuration file {path} must hold a mapping, got {type(data).__name__}")
+    data = read_mapping(path, "configuration file", "yaml", empty_is_mapping=True)
     unknown = sorted(set(data) - set(_BASE))
     if unknown:
         raise ValueError(f"configuration file {path}: unknown key(s) {unknown}; allowed: {sorted(_BASE)}")

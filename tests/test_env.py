@@ -271,3 +271,7 @@ def test_vehicle_parameters_load_from_json_and_yaml(tmp_path):
     bad.write_text("mass: -1\n")
     with pytest.raises(ValueError, match=r"bad\.yaml: mass must be in \(0, 100\]"):
         wall_env.VehicleParams.from_file(bad)
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"mass": 1.0,')
+    with pytest.raises(ValueError, match=r"vehicle file .*broken\.json is not valid JSON"):
+        wall_env.VehicleParams.from_file(broken)

@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_range", "check_positive", "check_vector", "check_finite_array", "read_json_object"]
+__all__ = ["check_range", "check_positive", "check_vector", "check_finite_array", "read_mapping",
+           "read_json_object"]
 
 
 def _as_float(name: str, value: Any) -> float:
@@ -68,15 +69,39 @@ def check_finite_array(name: str, value: Any, shape: tuple[int, ...]) -> np.ndar
     return array
 
 
-def read_json_object(path: str | Path, kind: str) -> dict[str, Any]:
-    """The JSON object in ``path``; errors say which ``kind`` of file (e.g. "model file") is wrong."""
+def read_mapping(path: str | Path, kind: str, fmt: str | None = None, empty_is_mapping: bool = False) -> dict[str, Any]:
+    """The mapping held by the JSON or YAML file at ``path``.
+
+    ``fmt``: ``"json"``, ``"yaml"``, or ``None`` to go by the suffix (``.json``, ``.yaml``,
+    ``.yml``). ``empty_is_mapping``: an empty YAML document reads as ``{}``. Errors say
+    which ``kind`` of file (e.g. "model file") is wrong, and where.
+    """
     path = Path(path)
+    if fmt is None:
+        suffix = path.suffix.lower()
+        if suffix not in (".json", ".yaml", ".yml"):
+            raise ValueError(f"{kind} {path} must end in .json, .yaml or .yml")
+        fmt = "json" if suffix == ".json" else "yaml"
+    if fmt == "json":
+        loads, syntax_errors = json.loads, (json.JSONDecodeError,)
+    else:
+        import yaml
+
+        loads, syntax_errors = yaml.safe_load, (yaml.YAMLError,)
     try:
-        data = json.loads(path.read_text())
+        data = loads(path.read_text())
     except FileNotFoundError:
         raise FileNotFoundError(f"{kind} {path} does not exist") from None
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{kind} {path} is not valid JSON: {exc}") from None
+    except syntax_errors as exc:
+        raise ValueError(f"{kind} {path} is not valid {fmt.upper()}: {exc}") from None
+    if data is None and empty_is_mapping:
+        data = {}
     if not isinstance(data, dict):
-        raise ValueError(f"{kind} {path} must hold a JSON object")
+        what = "a JSON object" if fmt == "json" else "a mapping"
+        raise ValueError(f"{kind} {path} must hold {what}, got {type(data).__name__}")
     return data
+
+
+def read_json_object(path: str | Path, kind: str) -> dict[str, Any]:
+    """The JSON object in ``path`` (whatever its suffix); errors name the ``kind`` of file."""
+    return read_mapping(path, kind, "json")

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from wall_env.validation import check_positive, check_range, check_vector
+from wall_env.validation import check_positive, check_range, check_vector, read_mapping
 
 __all__ = ["GRAVITY", "VehicleParams"]
 
@@ -151,18 +151,7 @@ class VehicleParams:
     @classmethod
     def from_file(cls, path: str | Path) -> VehicleParams:
         """Load from a ``.json`` or ``.yaml``/``.yml`` file holding the fields of this class."""
-        path = Path(path)
-        text = path.read_text()
-        if path.suffix.lower() in (".yaml", ".yml"):
-            import yaml
-
-            data = yaml.safe_load(text)
-        elif path.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
-            raise ValueError(f"vehicle file {path} must end in .json, .yaml or .yml")
-        if not isinstance(data, dict):
-            raise ValueError(f"vehicle file {path} must hold a mapping of parameter names to values")
+        data = read_mapping(path, "vehicle file")
         try:
             return cls.from_dict(data)
         except (TypeError, ValueError) as exc:
