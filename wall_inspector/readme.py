@@ -35,9 +35,11 @@ def agents_table(pretrained: Path) -> str:
         "position RMSE | wall-normal RMSE | contact steps |",
         "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
+    seeds = set()
     for card_path in sorted(pretrained.glob("*/model_card.json")):
         card = json.loads(card_path.read_text())
         t, m = card["training"], card["evaluation"]["metrics"]
+        seeds.add(len(card["evaluation"]["seeds"]))
         name = f"`{card['env_id'].split('/')[-1]}`"
         if card.get("residual"):
             name += f", residual on {_BASE_NAMES.get(card['residual'], card['residual'])}"
@@ -45,7 +47,6 @@ def agents_table(pretrained: Path) -> str:
             f"| [{name}]({card_path.parent.as_posix()}/model_card.md) | {t['total_timesteps']:,} | "
             f"{t['total_wall_time_s'] / 60:.1f} min | {t['steps_per_s']:,.0f} | {100 * m['completed']:.0f} % | "
             f"{100 * m['position_rmse_m']:.2f} cm | {100 * m['wall_normal_rmse_m']:.2f} cm | {m['collisions']} |")
-    seeds = {len(json.loads(p.read_text())["evaluation"]["seeds"]) for p in pretrained.glob("*/model_card.json")}
     lines += ["", f"From each agent's model card: trained by `wall-inspector train ... --ship` on this 2-core machine "
               f"(the card holds the exact command), evaluated on the task's nominal settings with command noise "
               f"over {'/'.join(str(n) for n in sorted(seeds))} seeds by the evaluation function of the comparison tables."]

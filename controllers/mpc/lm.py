@@ -90,13 +90,16 @@ def _backward_substitute(L: ca.SX, b: ca.SX) -> ca.SX:
     return ca.vertcat(*x)
 
 
+def _stage_symbols(problem: MPCProblem) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+    """The inputs of a stage function: previous point, point, stage parameters, globals."""
+    return (ca.SX.sym("prev_point", POINT_SIZE), ca.SX.sym("point", POINT_SIZE),
+            ca.SX.sym("stage", STAGE_PARAM_SIZE), ca.SX.sym("global", problem.global_size))
+
+
 def _stage_linearisation(problem: MPCProblem) -> ca.Function:
     """Per stage: cost, Jc^T Jc, Jp^T Jp, Jp^T Jc, Jc^T r, Jp^T r."""
     residual = problem.residual_function()
-    prev = ca.SX.sym("prev_point", POINT_SIZE)
-    cur = ca.SX.sym("point", POINT_SIZE)
-    s = ca.SX.sym("stage", STAGE_PARAM_SIZE)
-    g = ca.SX.sym("global", problem.global_size)
+    prev, cur, s, g = _stage_symbols(problem)
     d_prev = ca.SX.sym("d_prev", _B)
     d_cur = ca.SX.sym("d_cur", _B)
     r_pert = residual(boxplus_first_order(prev, d_prev), boxplus_first_order(cur, d_cur), s, g)
@@ -112,10 +115,7 @@ def _stage_linearisation(problem: MPCProblem) -> ca.Function:
 
 def _stage_cost(problem: MPCProblem) -> ca.Function:
     residual = problem.residual_function()
-    prev = ca.SX.sym("prev_point", POINT_SIZE)
-    cur = ca.SX.sym("point", POINT_SIZE)
-    s = ca.SX.sym("stage", STAGE_PARAM_SIZE)
-    g = ca.SX.sym("global", problem.global_size)
+    prev, cur, s, g = _stage_symbols(problem)
     return ca.Function("mpc_stage_cost", [prev, cur, s, g], [ca.sumsqr(residual(prev, cur, s, g))])
 
 
