@@ -75,11 +75,14 @@ _BASE: dict[str, Any] = {
     },
     "normalize": {"norm_obs": True, "norm_reward": True, "clip_obs": 10.0, "clip_reward": 10.0},
     "eval": {"freq": 100_000, "episodes": 5, "seed": 10_000},  # freq in env steps
-    "checkpoint_freq": 250_000,  # env steps; 0 turns checkpoints off
+    "checkpoint_freq": 250_000,  # env steps; 0 turns checkpoints by steps off
+    "checkpoint_minutes": 10.0,  # wall time between checkpoints as well; 0 turns checkpoints by time off
     "card_eval": {"episodes": 10, "seed": 0},  # final evaluation written to the model card
 }
 
 _ACTIVATIONS = ("tanh", "relu", "elu")
+# sections whose entries are free-form (keywords of the env or of a base controller, ranges by name)
+_OPEN_SECTIONS = ("env_kwargs", "randomize_ranges", "residual_base_kwargs")
 _RESIDUAL_BASES = (None, "pid", "scmpc")
 
 
@@ -153,9 +156,12 @@ def apply_overrides(config: dict[str, Any], overrides: list[str]) -> dict[str, A
             if not isinstance(node.get(part), dict):
                 raise ValueError(f"override {item!r}: {part!r} is not a section of the configuration")
             node = node[part]
-        if parts[-1] not in node and node is config:
-            raise ValueError(f"override {item!r}: unknown key {parts[-1]!r}; allowed: {sorted(config)}")
-        node[parts[-1]] = yaml.safe_load(raw)
+        if parts[-1] not in node and (node is config or parts[0] not in _OPEN_SECTIONS):
+            raise ValueError(f"override {item!r}: unknown key {parts[-1]!r}; allowed: {sorted(node)}")
+        try:
+            node[parts[-1]] = yaml.safe_load(raw)
+        except yaml.YAMLError as exc:
+            raise ValueError(f"override {item!r}: the value is not valid YAML ({str(exc).splitlines()[0]})") from None
     return validate_config(config)
 
 
@@ -169,8 +175,27 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
         return value
 
+    for section, allowed in _BASE.items():
+        if isinstance(allowed, dict) and section not in _OPEN_SECTIONS:
+            if not isinstance(config.get(section), dict):
+                raise ValueError(f"{section} must be a mapping, got {config.get(section)!r}")
+            unknown = sorted(set(config[section]) - set(allowed))
+            if unknown:
+                raise ValueError(f"{section}: unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+
+    def number(name: str, value: Any, low: float, high: float = float("inf"), low_open: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+            raise ValueError(f"{name} must be a number, got {value!r}")
+        if value < low or value > high or (low_open and value == low):
+            raise ValueError(f"{name} must be in {'(' if low_open else '['}{low}, {high}], got {value!r}")
+        return float(value)
+
     for key in ("timesteps", "n_envs", "n_workers", "torch_threads"):
         positive_int(key, config[key])
+    if isinstance(config["checkpoint_freq"], bool) or not isinstance(config["checkpoint_freq"], int) \
+            or config["checkpoint_freq"] < 0:
+        raise ValueError(f"checkpoint_freq must be a whole number of env steps >= 0, got {config['checkpoint_freq']!r}")
+    number("checkpoint_minutes", config["checkpoint_minutes"], 0.0)
     if config["n_workers"] > config["n_envs"]:
         raise ValueError(f"n_workers ({config['n_workers']}) must not exceed n_envs ({config['n_envs']})")
     if not isinstance(config["seed"], int):
@@ -180,10 +205,22 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
         positive_int(f"ppo.{key}", ppo[key])
     if ppo["n_steps"] * config["n_envs"] < 2:
         raise ValueError("ppo.n_steps * n_envs must be at least 2")
-    if not 0.0 < float(ppo["gamma"]) <= 1.0 or not 0.0 <= float(ppo["gae_lambda"]) <= 1.0:
-        raise ValueError(f"ppo.gamma must be in (0, 1] and ppo.gae_lambda in [0, 1], got {ppo['gamma']}, {ppo['gae_lambda']}")
-    if not float(ppo["learning_rate"]) > 0:
-        raise ValueError(f"ppo.learning_rate must be positive, got {ppo['learning_rate']!r}")
+    number("ppo.gamma", ppo["gamma"], 0.0, 1.0, low_open=True)
+    number("ppo.gae_lambda", ppo["gae_lambda"], 0.0, 1.0)
+    number("ppo.learning_rate", ppo["learning_rate"], 0.0, low_open=True)
+    for key in ("clip_range", "max_grad_norm"):
+        number(f"ppo.{key}", ppo[key], 0.0, low_open=True)
+    for key in ("ent_coef", "vf_coef"):
+        number(f"ppo.{key}", ppo[key], 0.0)
+    if ppo["target_kl"] is not None:
+        number("ppo.target_kl", ppo["target_kl"], 0.0, low_open=True)
+    number("policy.log_std_init", config["policy"]["log_std_init"], -20.0, 5.0)
+    norm = config["normalize"]
+    for key in ("norm_obs", "norm_reward"):
+        if not isinstance(norm[key], bool):
+            raise ValueError(f"normalize.{key} must be true or false, got {norm[key]!r}")
+    for key in ("clip_obs", "clip_reward"):
+        number(f"normalize.{key}", norm[key], 0.0, low_open=True)
     policy = config["policy"]
     if not (isinstance(policy["net_arch"], list) and all(isinstance(n, int) and n > 0 for n in policy["net_arch"])):
         raise ValueError(f"policy.net_arch must be a list of positive layer widths, got {policy['net_arch']!r}")
@@ -207,8 +244,15 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
             raise ValueError(f"randomize_ranges[{key!r}] must be a [low, high] pair, got {bounds!r}")
     if config["randomize"] and not ranges:
         raise ValueError("randomize is on but randomize_ranges is empty")
-    if int(config["eval"]["episodes"]) < 1 or int(config["card_eval"]["episodes"]) < 1:
-        raise ValueError("eval.episodes and card_eval.episodes must be at least 1")
+    for name in ("eval.freq", "eval.episodes", "card_eval.episodes"):
+        section, key = name.split(".")
+        positive_int(name, config[section][key])
+    for name in ("eval.seed", "card_eval.seed"):
+        section, key = name.split(".")
+        if isinstance(config[section][key], bool) or not isinstance(config[section][key], int):
+            raise ValueError(f"{name} must be an integer, got {config[section][key]!r}")
+    if not isinstance(config["randomize"], bool):
+        raise ValueError(f"randomize must be true or false, got {config['randomize']!r}")
     return config
 
 
