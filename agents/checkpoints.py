@@ -277,6 +277,17 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
+def _git_text(training: dict[str, Any]) -> str | None:
+    """The commit the run started from, and what differed from it (``git_uncommitted``: a
+    list of files, or a sentence for cards that could only say that something did)."""
+    commit, uncommitted = training.get("git_commit"), training.get("git_uncommitted")
+    if not commit or not uncommitted:
+        return commit
+    if isinstance(uncommitted, str):
+        return f"{commit} plus uncommitted changes: {uncommitted}"
+    return f"{commit} plus uncommitted changes to {', '.join(uncommitted)}"
+
+
 def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Path]:
     """Write ``model_card.json`` (everything) and ``model_card.md`` (for people) into ``folder``."""
     folder = Path(folder)
@@ -310,7 +321,7 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
         ("domain randomisation", card.get("randomize") or "off"),
         ("seed", training.get("seed")),
         ("machine", training.get("machine")),
-        ("git commit", training.get("git_commit")),
+        ("git commit", _git_text(training)),
         ("checkpoint evaluated below (the one to ship)", card.get("checkpoint")),
     ]
     lines += [f"| {name} | {_fmt(value)} |" for name, value in rows]

@@ -238,14 +238,6 @@ def git_state() -> dict[str, Any] | None:
         return None
 
 
-def _git_commit_text(state: dict[str, Any] | None) -> str | None:
-    if state is None:
-        return None
-    if not state["uncommitted"]:
-        return state["commit"]
-    return f"{state['commit']} plus uncommitted changes to {', '.join(state['uncommitted'])}"
-
-
 def _latest_checkpoint(run_dir: Path) -> Path:
     """The checkpoint folder in ``run_dir`` with the most timesteps (final or periodic)."""
     from agents.checkpoints import CheckpointNotFoundError, read_json
@@ -407,8 +399,8 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         "resumed": bool(resume),
         "machine": _machine(),
         "versions": _versions(),
-        "git_commit": _git_commit_text(git),
-        "git_uncommitted": git["uncommitted"] if git else None,
+        "git_commit": git["commit"] if git else None,
+        "git_uncommitted": git["uncommitted"] if git else None,  # files that differed from that commit
     })
     curve_file = out / "eval" / "evaluations.npz"
     if curve_file.is_file():  # the evaluation callback's history: [env steps, mean return, mean length (steps)]

@@ -43,11 +43,16 @@ class OneLineParser(argparse.ArgumentParser):
         usage_error(self.prog, f"{message} (see {self.prog} --help)")
 
 
-def usage_error(prog: str, message: str) -> NoReturn:
-    """Print ``PROG: error: MESSAGE`` (one line) on stderr and exit with status 2."""
+def print_usage_error(prog: str, message: str) -> int:
+    """Print ``PROG: error: MESSAGE`` as one line on stderr; return the exit status, 2."""
     text = " ".join(str(message).split())  # one line, whatever the message held
     print(f"{prog}: error: {text}", file=sys.stderr)
-    raise SystemExit(USAGE_ERROR)
+    return USAGE_ERROR
+
+
+def usage_error(prog: str, message: str) -> NoReturn:
+    """:func:`print_usage_error`, then exit with status 2."""
+    raise SystemExit(print_usage_error(prog, message))
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -66,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
         parser = _parser()
         if argv and argv[0] not in ("-h", "--help"):
-            parser.error(f"unknown command {argv[0]!r}; choose from {', '.join(COMMANDS)}")
+            return print_usage_error(parser.prog, f"unknown command {argv[0]!r}; choose from {', '.join(COMMANDS)}")
         parser.print_help()
         return 0
     name = argv[0]
@@ -80,7 +85,9 @@ def main(argv: list[str] | None = None) -> int:
         return int(module.run(args) or 0)
     except SystemExit as exit_:
         if isinstance(exit_.code, str):  # a command's own usage check: raise SystemExit("message")
-            usage_error(prog, exit_.code)
+            return print_usage_error(prog, exit_.code)
+        if exit_.code == USAGE_ERROR:  # the parser's, already printed as one line
+            return USAGE_ERROR
         raise
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
