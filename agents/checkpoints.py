@@ -229,7 +229,7 @@ def load_model(folder: str | Path, verify: bool = True) -> tuple[Any, Any, dict[
         raise CheckpointError(f"{files['model']}: corrupted or not a Stable-Baselines3 model archive (not a zip file)")
     try:
         model = PPO.load(files["model"], device="cpu")
-    except Exception as exc:  # noqa: BLE001 - any failure here means the file is unusable
+    except Exception as exc:
         raise CheckpointError(f"{files['model']}: corrupted or not a Stable-Baselines3 PPO model "
                               f"({type(exc).__name__}: {exc})") from exc
     obs_size = int(np.prod(model.observation_space.shape))

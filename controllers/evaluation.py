@@ -57,7 +57,7 @@ def solve_time_stats(seconds: Sequence[float]) -> dict[str, float]:
     """Median, mean, p99, p99.8 and max of solve times, in milliseconds (NaN if empty)."""
     ms = 1e3 * np.asarray(seconds, dtype=float)
     if ms.size == 0:
-        return {k: math.nan for k in ("median", "mean", "p99", "p99_8", "max")} | {"count": 0}
+        return dict.fromkeys(("median", "mean", "p99", "p99_8", "max"), math.nan) | {"count": 0}
     return {
         "median": float(np.median(ms)),
         "mean": float(ms.mean()),

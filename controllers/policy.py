@@ -122,7 +122,7 @@ class ControllerPolicy(ABC):
         """Fresh per-env memory at an episode start."""
         return {}
 
-    def _before_batch(self, n: int) -> None:
+    def _before_batch(self, n: int) -> None:  # noqa: B027 - an optional hook, empty unless overridden
         """Hook called once per :meth:`predict` with the batch size."""
 
     # ------------------------------------------------------------------ internals

@@ -247,7 +247,8 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
     try:
         header = next(reader)
     except StopIteration:
-        raise LogFormatError(f"{path}: the file is empty; expected a header row with columns {list(REQUIRED_COLUMNS)}")
+        raise LogFormatError(
+            f"{path}: the file is empty; expected a header row with columns {list(REQUIRED_COLUMNS)}") from None
     header = [h.strip() for h in header]
     duplicates = sorted({h for h in header if header.count(h) > 1})
     if duplicates:

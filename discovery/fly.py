@@ -166,15 +166,9 @@ def make_policy(policy: str, env: gym.Env, model: str | Path | None = None,
     path = Path(policy)
     if not path.exists():
         raise FileNotFoundError(f"--policy must be pid, mpc, scmpc or the path of a saved agent; {path} does not exist")
-    try:
-        from agents.policy import load_policy
-    except ImportError:
-        load_policy = None
-    if load_policy is not None and (path.is_dir() or (path.parent / "policy.json").exists()):
-        return load_policy(path, env=env)
-    from stable_baselines3 import PPO
+    from agents.policy import load_policy  # a checkpoint folder or its model.zip, with its VecNormalize statistics
 
-    return PPO.load(str(path), device="cpu")
+    return load_policy(path, env=env)
 
 
 def record_flight(env: gym.Env, policy: Any, *, seed: int, nominal_vehicle: VehicleParams,

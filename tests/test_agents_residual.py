@@ -95,7 +95,8 @@ def test_residual_on_pid_if_available():
     except ImportError as exc:
         pytest.skip(f"the PID controller has not landed yet ({exc})")
 
-    def fly(wrapped: bool, correction=np.zeros(4)):
+    def fly(wrapped: bool, correction=(0.0, 0.0, 0.0, 0.0)):
+        correction = np.asarray(correction, dtype=float)
         env = gym.make("WallInspector/WallHover-v0")
         pid = make_base_controller("pid", env)
         if wrapped:

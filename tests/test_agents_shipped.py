@@ -122,3 +122,23 @@ def test_shipped_model_cards_name_their_commit_and_say_what_differed():
         assert "(with uncommitted changes)" not in md
         if training.get("git_uncommitted"):
             assert f"{training['git_commit']} plus uncommitted changes" in md
+
+
+def test_fly_loads_agents_through_load_policy_with_their_statistics(tmp_path):
+    import shutil
+
+    from agents import CheckpointNotFoundError, TrainedPolicy
+    from discovery.fly import make_policy
+
+    env = gym.make("WallInspector/WallHover-v0")
+    folder = pretrained_path("WallHover-v0")
+    for source in (folder, folder / "model.zip"):
+        policy = make_policy(str(source), env)
+        assert isinstance(policy, TrainedPolicy) and policy.path == folder
+    # a model.zip without its statistics is refused, not flown un-normalised into the wall
+    shutil.copy(folder / "model.zip", tmp_path / "model.zip")
+    with pytest.raises(CheckpointNotFoundError, match="vecnormalize.pkl|policy.json"):
+        make_policy(str(tmp_path / "model.zip"), env)
+    with pytest.raises(TaskMismatchError):
+        make_policy(str(pretrained_path(SWEEP)), env)
+    env.close()

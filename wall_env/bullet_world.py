@@ -47,8 +47,8 @@ with _quiet_native_output():
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
 
-from wall_env.scene import Scene
-from wall_env.vehicle import VehicleParams
+from wall_env.scene import Scene  # noqa: E402 - after the quietened PyBullet import above
+from wall_env.vehicle import VehicleParams  # noqa: E402
 
 __all__ = ["BulletWorld", "Contact"]
 

@@ -55,9 +55,9 @@ import casadi as ca
 import numpy as np
 
 from controllers.mpc.manifold import POINT_SIZE, unpack_point
-from wall_env.rotations import so3_log
 from wall_env.aero import AeroModel, symbolic_scene
 from wall_env.effects import FlightContext
+from wall_env.rotations import so3_log
 from wall_env.scene import Scene
 from wall_env.validation import check_range, check_vector
 from wall_env.vehicle import GRAVITY, VehicleParams

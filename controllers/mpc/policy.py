@@ -103,7 +103,8 @@ class MPC(ControllerPolicy):
     def __init__(self, description: EnvDescription, model: AeroModel | None = None, *,
                  vehicle: VehicleParams | None = None, horizon: int = 20, dt: float = 0.01,
                  weights: MPCWeights | None = None, limits: InputLimits | None = None,
-                 solver: LMSettings | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True, force_at_prediction: bool = True):
+                 solver: LMSettings | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True,
+                 force_at_prediction: bool = True):
         super().__init__(description)
         if model is not None and not isinstance(model, AeroModel):
             raise ValueError(f"model must be a wall_env.AeroModel, got {type(model).__name__}")
