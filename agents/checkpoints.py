@@ -103,14 +103,15 @@ def read_vecnormalize(path: str | Path) -> Any:
     path = Path(path)
     try:
         with path.open("rb") as handle:
-            loaded = pickle.load(handle)
+            loaded: Any = pickle.load(handle)
     except FileNotFoundError:
         raise CheckpointNotFoundError(f"checkpoint file {path} does not exist") from None
     except Exception as exc:  # noqa: BLE001 - any unpickling failure means the file is unusable
         raise CheckpointError(f"{path}: corrupted or not a VecNormalize pickle ({type(exc).__name__}: {exc})") from None
     if not isinstance(loaded, VecNormalize):
         raise CheckpointError(f"{path}: not a VecNormalize pickle (holds a {type(loaded).__name__})")
-    mean, var = np.asarray(loaded.obs_rms.mean), np.asarray(loaded.obs_rms.var)
+    obs_rms: Any = loaded.obs_rms
+    mean, var = np.asarray(obs_rms.mean), np.asarray(obs_rms.var)
     if mean.ndim != 1 or mean.shape != var.shape or not np.all(np.isfinite(mean)) or not np.all(var >= 0):
         raise CheckpointError(f"{path}: observation statistics are malformed (mean shape {mean.shape}, var shape {var.shape})")
     return loaded
@@ -128,7 +129,7 @@ def vecnormalize_from_json(state: dict[str, Any], observation_space: Any, action
         def __init__(self) -> None:
             self.observation_space, self.action_space = observation_space, action_space
 
-    vec = VecNormalize(DummyVecEnv([SpacesOnly]), training=False, norm_obs=bool(state["norm_obs"]), norm_reward=False,
+    vec: Any = VecNormalize(DummyVecEnv([SpacesOnly]), training=False, norm_obs=bool(state["norm_obs"]), norm_reward=False,
                        clip_obs=float(state["clip_obs"]), clip_reward=float(state["clip_reward"]),
                        gamma=float(state["gamma"]), epsilon=float(state["epsilon"]))
     vec.obs_rms.mean = np.asarray(state["obs_mean"], dtype=np.float64)
@@ -232,7 +233,7 @@ def load_model(folder: str | Path, verify: bool = True) -> tuple[Any, Any, dict[
     except Exception as exc:
         raise CheckpointError(f"{files['model']}: corrupted or not a Stable-Baselines3 PPO model "
                               f"({type(exc).__name__}: {exc})") from exc
-    obs_size = int(np.prod(model.observation_space.shape))
+    obs_size = int(np.prod(model.observation_space.shape or ()))
     stats_size = int(np.prod(np.shape(vec_normalize.obs_rms.mean)))
     if stats_size != obs_size:
         raise CheckpointError(f"{files['normalization']}: statistics for {stats_size} observation entries, "

@@ -101,6 +101,8 @@ class ResidualActionWrapper(gym.Wrapper):
         if not np.all(self.scale > 0):
             raise ValueError(f"scale must be positive, got {self.scale.tolist()}")
         inner = env.observation_space
+        if not isinstance(inner, spaces.Box):
+            raise ValueError(f"a residual agent needs a Box observation space, got {inner}")
         low = np.concatenate([inner.low, -np.ones(4, dtype=np.float32)])
         high = np.concatenate([inner.high, np.ones(4, dtype=np.float32)])
         self.observation_space = spaces.Box(low, high, dtype=np.float32)

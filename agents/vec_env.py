@@ -186,7 +186,7 @@ class MultiEnvSubprocVecEnv(VecEnv):
         self._slices = split_evenly(n_envs, n_workers)
         if start_method is None:
             start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-        ctx = mp.get_context(start_method)
+        ctx: Any = mp.get_context(start_method)
         self.remotes, self.processes = [], []
         self.waiting = False
         self.closed = False

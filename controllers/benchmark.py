@@ -34,6 +34,7 @@ import json
 import os
 import platform
 import time
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -120,7 +121,7 @@ def measure(steps: int, seed: int, k_s: float, d_thr: float, with_ipopt: bool = 
             action, _ = policy.predict(observation, episode_start=np.array([start]))
         start = False
         record = policy.last_solves[0]
-        if ipopt is not None:
+        if ipopt is not None and record is not None:
             result = ipopt.solve(record.Z0, record.start, record.stage_params, record.global_params)
             ipopt_times.append(result.seconds)
             ipopt_cost.append(result.cost)
@@ -133,7 +134,7 @@ def measure(steps: int, seed: int, k_s: float, d_thr: float, with_ipopt: bool = 
             episodes += 1
             start = True
     env.close()
-    out = {
+    out: dict[str, Any] = {
         "env": ENV_ID,
         "k_s": k_s,
         "d_thr": d_thr,

@@ -173,7 +173,7 @@ def evaluate(
     *,
     deterministic: bool = True,
     reset_options: dict[str, Any] | None = None,
-    on_episode: Callable[[EpisodeRecord], None] | None = None,
+    on_episode: Callable[[EpisodeRecord], object] | None = None,
 ) -> EvaluationResult:
     """Fly ``policy`` for one episode per seed on ``env`` (an env id such as
     ``"WallInspector/WallSweep-v0"`` made with ``env_kwargs``, or a zero-argument env
@@ -199,7 +199,7 @@ def evaluate(
         if not callable(policy):
             raise ValueError("policy must have a predict() method or be a factory policy(env)")
         policy = policy(environment)
-    base = environment.unwrapped
+    base: Any = environment.unwrapped
     mapping = base.action_mapping
     hover_thrust = base.vehicle.mass * GRAVITY
     episodes = []

@@ -71,7 +71,7 @@ TABLE_I = tuple(Scenario("I", "WallInspector/WallCircle-v0", k_s, 0.10, TABLE_I_
 TABLE_II = (Scenario("II", "WallInspector/WallSweep-v0", 4.1, 0.132, TABLE_II_SEEDS),)
 
 # The paper's figures (cm) for the README and the printed comparison.
-PAPER_VALUES = {
+PAPER_VALUES: dict[str, dict[Any, Any]] = {
     "I": {  # wall-normal (their Y) MAE / RMSE, simulation
         ("PID", 10.0): (4.1, 5.4), ("MPC", 1.0): (0.27, 0.47), ("MPC", 4.0): (0.88, 0.98),
         ("MPC", 10.0): (2.9, 3.0), ("SC-MPC", 10.0): (0.32, 0.39),

@@ -84,6 +84,8 @@ def read_mapping(path: str | Path, kind: str, fmt: str | None = None, empty_is_m
         if suffix not in (".json", ".yaml", ".yml"):
             raise ValueError(f"{kind} {path} must end in .json, .yaml or .yml")
         fmt = "json" if suffix == ".json" else "yaml"
+    loads: Any
+    syntax_errors: tuple[type[Exception], ...]
     if fmt == "json":
         loads, syntax_errors = json.loads, (json.JSONDecodeError,)
     else:

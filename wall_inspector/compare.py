@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import time
+from typing import Any
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -53,7 +54,7 @@ def _weights(preset: str, items: list[str]):
     if not items:
         return (None if preset == "paper" else base), base_note
     fields = {f.name for f in dataclasses.fields(MPCWeights)}
-    changes = {}
+    changes: dict[str, Any] = {}
     for item in items:
         name, sep, values = item.partition("=")
         if not sep or name not in fields:

@@ -11,6 +11,7 @@ every method's distance from the wall against time.
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -19,7 +20,7 @@ import wall_env  # registers the environments
 from wall_env.validation import check_output_folder
 
 ENV_ID = "WallInspector/WallSweep-v0"
-SUCTION = {"k_s": 4.1, "d_thr": 0.132}
+SUCTION: dict[str, Any] = {"k_s": 4.1, "d_thr": 0.132}
 
 
 def _policies() -> dict:
@@ -40,7 +41,7 @@ def _policies() -> dict:
     return policies
 
 
-def fly(make_policy, seed: int, render: bool) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+def fly(make_policy: Any, seed: int, render: bool) -> tuple[dict[str, np.ndarray], Any]:
     env = gym.make(ENV_ID, **SUCTION, terminate_on_collision=False, render_mode="rgb_array" if render else None)
     policy = make_policy(env)
     obs, _ = env.reset(seed=seed)

@@ -50,6 +50,7 @@ functions, so changing them never regenerates code; only the model's structure
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -85,20 +86,20 @@ class MPCWeights:
     0.2 N / 0.1 / 0.1 / 0.01 rad/s) and our control-limit sigma 0.01.
     """
 
-    position: tuple[float, float, float] = (0.15, 0.15, 0.20)
-    rotation: tuple[float, float, float] = (0.3, 0.3, 0.03)
-    velocity: tuple[float, float, float] = (2.3, 2.3, 2.3)
-    terminal_position: tuple[float, float, float] = (0.05, 0.05, 0.05)
+    position: tuple[float, ...] = (0.15, 0.15, 0.20)
+    rotation: tuple[float, ...] = (0.3, 0.3, 0.03)
+    velocity: tuple[float, ...] = (2.3, 2.3, 2.3)
+    terminal_position: tuple[float, ...] = (0.05, 0.05, 0.05)
     dynamics: tuple[float, ...] = (1e-4,) * 9
-    control_rate: tuple[float, float, float, float] = (0.2, 0.1, 0.1, 0.01)
-    control_limit: tuple[float, float, float, float] = (0.01, 0.01, 0.01, 0.01)
+    control_rate: tuple[float, ...] = (0.2, 0.1, 0.1, 0.01)
+    control_limit: tuple[float, ...] = (0.01, 0.01, 0.01, 0.01)
 
     def __post_init__(self) -> None:
         sizes = {"position": 3, "rotation": 3, "velocity": 3, "terminal_position": 3, "dynamics": 9,
                  "control_rate": 4, "control_limit": 4}
         for name, size in sizes.items():
-            value = getattr(self, name)
-            if np.isscalar(value):
+            value: Any = getattr(self, name)
+            if isinstance(value, (int, float, np.floating, np.integer)):
                 value = (float(value),) * size
             object.__setattr__(self, name, check_vector(f"weights.{name}", value, size, low=1e-9, high=1e9))
 
