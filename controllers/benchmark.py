@@ -18,7 +18,7 @@ Reported, in milliseconds: median, p99, p99.8 and max of
 
 the ratio of IPOPT's to LM's median, and the relative cost gap
 ``(F_LM - F_IPOPT) / F_IPOPT`` (its share of steps within 1 %, median and max).
-Targets (issue 3), checked on the wall-clock LM figures: median <= 1.0 ms,
+Targets, checked on the wall-clock LM figures: median <= 1.0 ms,
 p99.8 <= 3 ms, >= 10x faster than IPOPT, gap within 1 % on >= 95 % of the steps. The process is pinned to one CPU core
 (``--no-pin`` to leave it free); ``--high-priority`` runs the SC-MPC steps (not the
 simulator, not IPOPT) with real-time FIFO scheduling where permitted, so that other

@@ -200,7 +200,7 @@ def markdown_tables(results: Sequence[ScenarioResult], note: str = "") -> str:
 
 
 def acceptance(results: Sequence[ScenarioResult]) -> list[dict[str, Any]]:
-    """The issue's acceptance figures: each check with its measured value and verdict."""
+    """The acceptance figures: each check with its measured value and verdict."""
     def find(table: str, policy: str, k_s: float | None = None) -> dict[str, Any] | None:
         for r in results:
             if r.scenario.table == table and r.policy == policy and (k_s is None or r.scenario.k_s == k_s):

@@ -172,6 +172,7 @@ def test_residual_agent_trains_saves_and_loads_on_pid(tmp_path, monkeypatch):
     shutil.copytree(out / "best", scmpc_dir)
     info = json.loads((scmpc_dir / "policy.json").read_text())
     info["residual"].update(base="scmpc", base_kwargs={"k_s": 4.1, "d_thr": 0.132})
+    info["env_id"] = "WallInspector/WallCircle-v0"  # flown on the circle below (agents are checked against the task)
     (scmpc_dir / "policy.json").write_text(json.dumps(info))
     built = []
     monkeypatch.setattr(agents.residual, "make_base_controller",

@@ -3,6 +3,8 @@ NaN observation, loaded for the wrong task."""
 
 from __future__ import annotations
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -14,16 +16,27 @@ from agents.policy import TaskMismatchError, policy_factory
 SWEEP = "WallInspector/WallSweep-v0"
 
 
-def test_shipped_agent_flies_with_plain_stable_baselines3_loading():
-    """The README's two lines: ``PPO.load`` + ``VecNormalize.load``, nothing from this package."""
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import VecNormalize
+def _readme_snippet(containing: str) -> str:
+    from pathlib import Path
 
-    folder = pretrained_path(SWEEP)
-    model = PPO.load(folder / "model.zip", device="cpu")
-    env = VecNormalize.load(str(folder / "vecnormalize.pkl"), make_vec_env(SWEEP, n_envs=1, seed=0))
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)
+    return next(block for block in blocks if containing in block)
+
+
+def test_shipped_agent_flies_with_the_readmes_plain_stable_baselines3_loading(monkeypatch):
+    """The README's two lines, ``PPO.load`` + ``VecNormalize.load``, run as written: nothing
+    from this package but the environment registration."""
+    from pathlib import Path
+
+    snippet = _readme_snippet("VecNormalize.load")
+    assert "import agents" not in snippet
+    monkeypatch.chdir(Path(__file__).resolve().parent.parent)  # the README's paths are relative to the repository
+    namespace: dict = {}
+    exec(compile(snippet, "README.md", "exec"), namespace)
+    model, env = namespace["model"], namespace["env"]
     assert not env.training and not env.norm_reward  # evaluation mode as saved: frozen statistics, raw rewards
+    env.seed(0)
     obs = env.reset()
     contacts, steps, total = 0, 0, 0.0
     while True:
@@ -109,7 +122,6 @@ def test_agent_loaded_for_another_task_is_refused():
 
 def test_shipped_model_cards_name_their_commit_and_say_what_differed():
     import json
-    import re
 
     from agents.policy import PRETRAINED_DIR
 

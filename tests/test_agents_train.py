@@ -182,7 +182,9 @@ def test_policy_factory_without_source_picks_the_envs_own_task(cli_run, tmp_path
 
 
 def test_ctrl_c_saves_everything_and_resume_goes_on_from_the_same_step(tmp_path):
-    """SIGINT to a real ``wall-inspector train`` process, then ``--resume``."""
+    """Ctrl-C (SIGINT to the whole process group, workers included, as a terminal sends it) to a
+    real ``wall-inspector train`` process, then ``--resume``."""
+    import os
     import signal
     import subprocess
     import sys
@@ -193,13 +195,13 @@ def test_ctrl_c_saves_everything_and_resume_goes_on_from_the_same_step(tmp_path)
                "--n-envs", "2", "--workers", "1", "--set", "ppo.n_steps=256", "--set", "ppo.batch_size=256",
                "--set", "ppo.n_epochs=1", "--eval-freq", "512", "--eval-episodes", "1", "--no-progress", "--quiet",
                "--out", str(out)]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         deadline = time.monotonic() + 120
         while not (out / "eval" / "evaluations.npz").exists():  # training is under way
             assert process.poll() is None and time.monotonic() < deadline, process.communicate()
             time.sleep(0.1)
-        process.send_signal(signal.SIGINT)
+        os.killpg(process.pid, signal.SIGINT)
         _, err = process.communicate(timeout=60)
     finally:
         if process.poll() is None:

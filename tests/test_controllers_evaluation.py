@@ -140,7 +140,7 @@ def test_runner_tables_json_and_figures(tmp_path):
     assert len(data["runs"]) == 10 and len(data["runs"][0]["per_episode"]) == 1
 
 
-def test_paper_scenarios_are_the_issue_s():
+def test_paper_scenarios_are_the_papers():
     assert [(s.env_id, s.k_s, s.d_thr, len(s.seeds)) for s in pt.TABLE_I] == [
         ("WallInspector/WallCircle-v0", k, 0.10, 5) for k in (1.0, 4.0, 10.0)]
     assert [(s.env_id, s.k_s, s.d_thr, len(s.seeds)) for s in pt.TABLE_II] == [

@@ -89,7 +89,7 @@ def _ppo_policies(env_id: str, residual: bool) -> dict:
 
 
 def _ppo_acceptance(results) -> list[dict]:
-    """Issue 4: the shipped sweep agent has at most one collision in the Table II scenario."""
+    """The shipped sweep agent has at most one collision in the Table II scenario."""
     for r in results:
         if r.scenario.table == "II" and r.policy == "PPO":
             m = r.metrics()

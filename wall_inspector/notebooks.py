@@ -44,7 +44,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import nbformat
+    try:
+        import nbclient  # noqa: F401
+        import nbformat
+    except ImportError as exc:
+        raise SystemExit(f"the notebooks command needs the 'notebooks' extra ({exc.name} is missing): "
+                         "pip install 'wall-inspector[notebooks]' (make test and make demo install it)") from None
 
     paths = [Path(p) for p in args.paths] or sorted(NOTEBOOK_DIR.glob("*.ipynb"))
     for path in paths:

@@ -35,9 +35,9 @@ adds ``wall_suction`` (and whatever else a model file holds). No force formula i
 written here. The paper's Eq. 13 has no moment, and the inputs are body rates, so
 the model's moment is not used.
 
-Weights are ``1 / sigma^2`` with the authors' released standard deviations
-(``../shared/notes/reference-numbers.md``). The control-limit sigma is not in
-their notes; 0.01 (in the input's unit) is our choice, which makes a 0.1 N or
+Weights are ``1 / sigma^2`` with the standard deviations of the authors' released
+controller (the code the paper cites, https://anonymous.4open.science/r/SC-MPC-6A61).
+The control-limit sigma is not in that code; 0.01 (in the input's unit) is our choice, which makes a 0.1 N or
 0.1 rad/s violation cost as much as a 1.5 m position error at one stage. The
 thrust penalty starts ``thrust_margin`` = 1 N inside ``[5, 27] N`` as theirs does.
 
