@@ -56,7 +56,7 @@ class TrainedPolicy:
         self.vec_normalize = vec_normalize
         self.info = info
         self.path = path
-        self.env_id: str = info["env_id"]
+        self.env_id: str | None = info.get("env_id")  # None for a plain Stable-Baselines3 save
         self.observation_space = model.observation_space
         self.action_space = model.action_space
         self.failures = 0
@@ -64,7 +64,10 @@ class TrainedPolicy:
 
     def normalize(self, observation: np.ndarray) -> np.ndarray:
         """The observation as the network sees it (float32, normalised and clipped)."""
-        return np.asarray(self.vec_normalize.normalize_obs(np.asarray(observation, dtype=np.float32)), dtype=np.float32)
+        obs = np.asarray(observation, dtype=np.float32)
+        if self.vec_normalize is None:  # a model trained without VecNormalize
+            return obs
+        return np.asarray(self.vec_normalize.normalize_obs(obs), dtype=np.float32)
 
     def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, Any]:
@@ -122,6 +125,28 @@ def _resolve(source: str | Path) -> Path:
     return folder
 
 
+def _plain_sb3_model(source: str | Path) -> TrainedPolicy | None:
+    """A model saved by Stable-Baselines3 itself (a ``.zip`` with no ``policy.json`` beside it),
+    with the ``vecnormalize.pkl`` beside it if there is one; ``None`` for anything else."""
+    path = Path(source)
+    if not (path.is_file() and path.suffix == ".zip") or (path.parent / "policy.json").exists():
+        return None
+    from stable_baselines3 import PPO
+
+    from agents.checkpoints import CheckpointError, read_vecnormalize
+
+    try:
+        model = PPO.load(path, device="cpu")
+    except Exception as exc:
+        raise CheckpointError(f"{path}: corrupted or not a Stable-Baselines3 PPO model ({type(exc).__name__}: {exc})") from exc
+    statistics = path.parent / "vecnormalize.pkl"
+    vec_normalize = read_vecnormalize(statistics) if statistics.is_file() else None
+    if vec_normalize is None:
+        warnings.warn(f"{path}: no vecnormalize.pkl beside it, so the policy sees raw observations (right only for an "
+                      "agent trained without VecNormalize)", RuntimeWarning, stacklevel=3)
+    return TrainedPolicy(model, vec_normalize, {"env_id": None, "algorithm": "PPO", "residual": None}, path.parent)
+
+
 def _env_task_or_none(env: Any) -> str | None:
     inner = env.envs[0] if hasattr(env, "envs") and env.envs else env  # a DummyVecEnv: its first env
     task = getattr(getattr(inner, "unwrapped", inner), "task", None)
@@ -132,7 +157,7 @@ def check_task(info: dict[str, Any], env: Any, folder: Path, allow_other_task: b
     """Refuse (``TaskMismatchError``) an ``env`` of another task than ``info["env_id"]``;
     with ``allow_other_task`` warn instead."""
     task = _env_task_or_none(env)
-    if task is None or task == task_name(info["env_id"]):
+    if task is None or not info.get("env_id") or task == task_name(info["env_id"]):
         return
     message = (f"{folder} holds an agent trained on {info['env_id']}, but the environment is {task_env_id(task)}")
     if not allow_other_task:
@@ -149,12 +174,17 @@ def load_policy(source: str | Path, env: Any = None, verify: bool = True, base_k
     folder) or the ``model.zip`` inside one. ``env``: needed only for residual agents, to
     build the base controller; ``base_kwargs`` replace the saved keywords of that base
     (e.g. the true ``k_s``/``d_thr`` for SC-MPC). ``verify``: recompute the actions
-    recorded at save time. An ``env`` of another task than the agent's raises
+    recorded at save time. A ``.zip`` saved by Stable-Baselines3 itself (no ``policy.json``
+    beside it) loads too, with the ``vecnormalize.pkl`` beside it if present (without one
+    the policy sees raw observations, and a ``RuntimeWarning`` says so). An ``env`` of another task than the agent's raises
     :class:`TaskMismatchError` (``allow_other_task=True``: a ``RuntimeWarning`` instead).
 
     The files are Stable-Baselines3's own: ``PPO.load(folder / "model.zip")`` and
     ``VecNormalize.load(folder / "vecnormalize.pkl", venv)`` read them without this package.
     """
+    plain = _plain_sb3_model(source)
+    if plain is not None:
+        return plain
     folder = _resolve(source)
     model, vec_normalize, info = load_model(folder, verify=verify)
     if env is not None:

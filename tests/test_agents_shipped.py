@@ -147,10 +147,21 @@ def test_fly_loads_agents_through_load_policy_with_their_statistics(tmp_path):
     for source in (folder, folder / "model.zip"):
         policy = make_policy(str(source), env)
         assert isinstance(policy, TrainedPolicy) and policy.path == folder
-    # a model.zip without its statistics is refused, not flown un-normalised into the wall
+    # a model saved by Stable-Baselines3 alone: with vecnormalize.pkl beside it, flown as the checkpoint is
     shutil.copy(folder / "model.zip", tmp_path / "model.zip")
-    with pytest.raises(CheckpointNotFoundError, match="vecnormalize.pkl|policy.json"):
-        make_policy(str(tmp_path / "model.zip"), env)
+    shutil.copy(folder / "vecnormalize.pkl", tmp_path / "vecnormalize.pkl")
+    obs = np.asarray(load_policy(folder).info["check"]["observations"], dtype=np.float32)
+    plain = make_policy(str(tmp_path / "model.zip"), env)
+    np.testing.assert_array_equal(plain.predict(obs)[0], load_policy(folder).predict(obs)[0])
+    # without it, the raw observations are used, and the user is told so
+    (tmp_path / "vecnormalize.pkl").unlink()
+    with pytest.warns(RuntimeWarning, match="no vecnormalize.pkl beside it"):
+        raw = make_policy(str(tmp_path / "model.zip"), env)
+    assert raw.vec_normalize is None
+    # a checkpoint folder with a file missing is refused with the file's name
+    (tmp_path / "policy.json").write_text((folder / "policy.json").read_text())
+    with pytest.raises(CheckpointNotFoundError, match="vecnormalize.pkl"):
+        make_policy(str(tmp_path), env)
     with pytest.raises(TaskMismatchError):
         make_policy(str(pretrained_path(SWEEP)), env)
     env.close()
