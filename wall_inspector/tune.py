@@ -47,6 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="environment keyword, e.g. k_s=10 or standoff=0.14 (repeatable)")
     parser.add_argument("--sampler-seed", type=int, default=0, help="seed of the TPE sampler (default 0)")
+    parser.add_argument("--start", action="append", default=[], metavar="PRESET",
+                        help="also fly this preset's settings first (a name or file; repeatable); the authors' "
+                             "settings are always the first trial")
     parser.add_argument("--out", default=None, help="run folder (default runs/tune/<task>_<method>)")
     parser.add_argument("--ship", action="store_true", help="copy the preset into controllers/presets")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -126,6 +129,8 @@ def run(args: argparse.Namespace) -> int:
         space_method = "mpc" if method == "mpc+scmpc" else method
         space = SearchSpace(space_method, load_preset("paper", method=space_method).methods[space_method],
                             tune_dt=not args.fixed_dt, horizon_steps=tuple(steps))
+        for start in args.start:
+            load_preset(start, method=space_method)
         slug = "paper_table_i" if method == "mpc+scmpc" else f"{task_slug(env_id)}_{method}"
         out = Path(args.out) if args.out else Path("runs") / "tune" / slug
         if out.exists() and not out.is_dir():
@@ -138,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
     objective = default_objective(args.objective, env_id, method, train, env_kwargs)
     tuner = Tuner(objective, heldout, out, budget_trials=args.budget_trials,
                   budget_minutes=args.budget_minutes or None, seed=args.sampler_seed, space=space, command=command,
-                  progress=not args.no_progress)
+                  progress=not args.no_progress, start=args.start)
     try:
         result = tuner.run()
     except KeyboardInterrupt:

@@ -100,12 +100,14 @@ class Tuner:
     seed: seed of the TPE sampler.
     space: the search space (default: the method's, from the authors' settings).
     command: the command line recorded in the provenance.
+    base_preset: the settings the first trial flies and that unsearched values keep (the authors').
+    start: further presets (names or files) whose settings are flown as the next trials.
     """
 
     def __init__(self, objective: TrackingObjective | PaperTableIObjective, heldout_seeds: Sequence[int],
                  run_dir: str | Path, *, budget_trials: int | None = 50, budget_minutes: float | None = None,
                  seed: int = 0, space: SearchSpace | None = None, command: str = "", progress: bool = True,
-                 base_preset: str | Path = "paper"):
+                 base_preset: str | Path = "paper", start: Sequence[str | Path] = ()):
         if budget_trials is None and budget_minutes is None:
             raise ValueError("give a budget: budget_trials and/or budget_minutes")
         if budget_trials is not None and (isinstance(budget_trials, bool) or not 1 <= int(budget_trials) <= 100000):
@@ -125,6 +127,7 @@ class Tuner:
         space_method = "mpc" if self.method == "mpc+scmpc" else self.method
         self.base = load_preset(base_preset, method=space_method)
         self.space = space or SearchSpace(space_method, self.base.methods[space_method])
+        self.start = [load_preset(p, method=space_method) for p in start]
         self.command = command
         self.progress = progress
 
@@ -173,8 +176,9 @@ class Tuner:
         optuna.logging.set_verbosity(optuna.logging.WARNING)
         study = self._study()
         if not study.trials:
-            study.enqueue_trial(self.space.values_of(self.base.methods[self.space.method]),
-                                user_attrs={"start": "the authors' settings"})
+            for preset in [self.base, *self.start]:
+                study.enqueue_trial(self.space.values_of(preset.methods[self.space.method]),
+                                    user_attrs={"start": f"preset {preset.name}"})
         done, _, _ = self._done(study)
         left_trials, left_seconds = self.remaining(study)
         total = self.budget_trials if self.budget_trials is not None else None
@@ -239,6 +243,7 @@ class Tuner:
             "budget": {"trials": self.budget_trials, "minutes": self.budget_minutes},
             "used": {"trials": trials, "env_steps": env_steps, "wall_time_s": round(wall_time, 1)},
             "sampler": f"optuna TPESampler(seed={self.seed}), MedianPruner(n_startup_trials=8)",
+            "start": [{"preset": p.name, "settings": p.methods[self.space.method]} for p in [self.base, *self.start]],
             "command": self.command,
             "commit": git_commit(),
             "date": time.strftime("%Y-%m-%d", time.gmtime()),
