@@ -182,4 +182,6 @@ def test_residual_agent_trains_saves_and_loads_on_pid(tmp_path, monkeypatch):
     factory(env, TABLE_I[2])
     factory(env)
     env.close()
-    assert built[-2:] == [("scmpc", {"k_s": 10.0, "d_thr": 0.10}), ("scmpc", {"k_s": 4.1, "d_thr": 0.132})]
+    # (its policy.json names no preset: agents saved before presets existed flew the authors' settings)
+    assert built[-2:] == [("scmpc", {"preset": "paper", "k_s": 10.0, "d_thr": 0.10}),
+                          ("scmpc", {"preset": "paper", "k_s": 4.1, "d_thr": 0.132})]
