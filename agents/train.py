@@ -506,6 +506,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         config, out = _usage(args)
         checks = check_observations(config)  # builds the env once: settings it refuses stop the command here
+        if config["randomize"]:  # and once with the randomisation ranges
+            from agents.envs import make_env
+
+            make_env(config, monitor=False).close()
     except (ValueError, FileNotFoundError) as exc:
         raise SystemExit(str(exc)) from None
     planned = planned_timesteps(config) if not args.resume else None
