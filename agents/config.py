@@ -133,16 +133,25 @@ def apply_overrides(config: dict[str, Any], overrides: list[str]) -> dict[str, A
         if parts[-1] not in node and (node is config or parts[0] not in _OPEN_SECTIONS):
             raise ValueError(f"override {item!r}: unknown key {parts[-1]!r}; allowed: {sorted(node)}")
         try:
-            node[parts[-1]] = yaml.safe_load(raw)
+            value = yaml.safe_load(raw)
         except yaml.YAMLError as exc:
             raise ValueError(f"override {item!r}: the value is not valid YAML ({str(exc).splitlines()[0]})") from None
+        if isinstance(node.get(parts[-1]), dict) and (node is not config or parts[-1] not in _OPEN_SECTIONS):
+            if not isinstance(value, dict):  # a section: its entries change, one by one
+                raise ValueError(f"override {item!r}: {key.strip()} is a section; set its entries as "
+                                 f"{key.strip()}.KEY=VALUE or give a mapping")
+            value = _merge(node[parts[-1]], value)
+        node[parts[-1]] = value
     return validate_config(config)
 
 
 def validate_config(config: dict[str, Any]) -> dict[str, Any]:
     """Check types and ranges; return ``config`` (normalised in place) or raise ``ValueError``."""
-    if config.get("env_id") is not None:
-        config["env_id"] = task_env_id(config["env_id"])
+    if config.get("env_id") is None:
+        raise ValueError("env_id is not set: name the task (--env, or env_id in the configuration file)")
+    if not isinstance(config["env_id"], str):
+        raise ValueError(f"env_id must be a task name such as WallInspector/WallSweep-v0, got {config['env_id']!r}")
+    config["env_id"] = task_env_id(config["env_id"])
 
     def positive_int(name: str, value: Any) -> int:
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -156,6 +165,9 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
             unknown = sorted(set(config[section]) - set(allowed))
             if unknown:
                 raise ValueError(f"{section}: unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+            missing = sorted(set(allowed) - set(config[section]))
+            if missing:
+                raise ValueError(f"{section}: missing key(s) {missing}")
 
     def number(name: str, value: Any, low: float, high: float = float("inf"), low_open: bool = False) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
@@ -203,18 +215,25 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
     if config["residual"] not in _RESIDUAL_BASES:
         raise ValueError(f"residual must be one of {_RESIDUAL_BASES}, got {config['residual']!r}")
     scale = config["residual_scale"]
-    if isinstance(scale, (int, float)):
+    if isinstance(scale, (int, float)) and not isinstance(scale, bool):
         scale = config["residual_scale"] = [float(scale)] * 4
-    if len(scale) != 4 or not all(0.0 < float(s) <= 2.0 for s in scale):
+    if not (isinstance(scale, (list, tuple)) and len(scale) == 4
+            and all(isinstance(s, (int, float)) and not isinstance(s, bool) and 0.0 < s <= 2.0 for s in scale)):
         raise ValueError(f"residual_scale must be 4 numbers in (0, 2], got {scale!r}")
+    base_kwargs = config["residual_base_kwargs"]
+    if not (isinstance(base_kwargs, dict) and all(isinstance(v, dict) or v is None for v in base_kwargs.values())):
+        raise ValueError(f"residual_base_kwargs must map a base controller to its keywords, got {base_kwargs!r}")
     if not isinstance(config["env_kwargs"], dict):
         raise ValueError(f"env_kwargs must be a mapping, got {config['env_kwargs']!r}")
     reserved = sorted({"randomize", "task"} & set(config["env_kwargs"]))
     if reserved:
         raise ValueError(f"env_kwargs must not set {reserved}; use randomize/randomize_ranges")
     ranges = config["randomize_ranges"] or {}
+    if not isinstance(ranges, dict):
+        raise ValueError(f"randomize_ranges must be a mapping of name: [low, high], got {ranges!r}")
     for key, bounds in ranges.items():
-        if not (isinstance(bounds, (list, tuple)) and len(bounds) == 2):
+        if not (isinstance(bounds, (list, tuple)) and len(bounds) == 2
+                and all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in bounds)):
             raise ValueError(f"randomize_ranges[{key!r}] must be a [low, high] pair, got {bounds!r}")
     if config["randomize"] and not ranges:
         raise ValueError("randomize is on but randomize_ranges is empty")
