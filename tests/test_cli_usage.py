@@ -77,3 +77,25 @@ def test_unknown_command_is_one_line(capsys):
     assert main(["fly-to-the-moon"]) == 2
     err = capsys.readouterr().err
     assert err == "wall-inspector: error: unknown command 'fly-to-the-moon'; choose from " + ", ".join(COMMANDS) + "\n"
+
+
+def test_readme_checks_every_input_before_writing(tmp_path, capsys):
+    readme = tmp_path / "README.md"
+    readme.write_text("<!-- BEGIN a -->\nold\n<!-- END a -->\n")
+    table = tmp_path / "a.md"
+    table.write_text("| new |\n")
+    cases = [
+        (["--readme", str(tmp_path / "missing.md")], f"--readme {tmp_path / 'missing.md'}: cannot read"),
+        (["--readme", str(readme), "--set", f"a={table}", "--set", f"a={tmp_path / 'gone.md'}"], "cannot read"),
+        (["--readme", str(readme), "--set", f"a={table}", "--set", f"b={table}"], "README has no block"),
+        (["--readme", str(readme), "--set", "a"], "--set takes NAME=FILE"),
+    ]
+    for args, message in cases:
+        assert main(["readme", *args]) == 2
+        assert message in _one_line_error(capsys, "readme")
+        assert readme.read_text() == "<!-- BEGIN a -->\nold\n<!-- END a -->\n"  # untouched: the first block was not written
+
+
+def test_notebooks_checks_its_paths_before_running_any(tmp_path, capsys):
+    assert main(["notebooks", str(tmp_path / "missing.ipynb")]) == 2
+    assert "missing.ipynb: not a notebook file" in _one_line_error(capsys, "notebooks")

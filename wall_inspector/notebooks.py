@@ -52,6 +52,9 @@ def run(args: argparse.Namespace) -> int:
                          "pip install 'wall-inspector[notebooks]' (make test and make demo install it)") from None
 
     paths = [Path(p) for p in args.paths] or sorted(NOTEBOOK_DIR.glob("*.ipynb"))
+    for path in paths:  # all of them checked before the first one runs
+        if not path.is_file() or path.suffix != ".ipynb":
+            raise SystemExit(f"{path}: not a notebook file (.ipynb)")
     for path in paths:
         start = time.perf_counter()
         notebook = execute(path, fast=args.fast, timeout=args.timeout)
