@@ -116,3 +116,25 @@ def test_task_without_shipped_checkpoint_names_the_expected_folder(monkeypatch, 
     monkeypatch.setattr(agents.policy, "PRETRAINED_DIR", tmp_path / "pretrained")
     with pytest.raises(CheckpointNotFoundError, match=re.escape(str(tmp_path / "pretrained" / "wall_sweep"))):
         load_policy("WallInspector/WallSweep-v0")
+
+
+def test_checkpoint_of_the_earlier_json_format_is_named_and_upgraded_exactly(checkpoint, tmp_path):
+    """How the shipped agents were converted: normalization.json -> vecnormalize.pkl, same actions."""
+    from agents.checkpoints import read_vecnormalize, upgrade_checkpoint
+
+    folder = _copy(checkpoint, tmp_path)
+    stats = read_vecnormalize(folder / "vecnormalize.pkl")
+    (folder / "normalization.json").write_text(json.dumps({
+        "format": 1, "norm_obs": True, "norm_reward": True, "clip_obs": stats.clip_obs, "clip_reward": stats.clip_reward,
+        "epsilon": stats.epsilon, "gamma": stats.gamma, "obs_mean": stats.obs_rms.mean.tolist(),
+        "obs_var": stats.obs_rms.var.tolist(), "obs_count": stats.obs_rms.count, "ret_mean": float(stats.ret_rms.mean),
+        "ret_var": float(stats.ret_rms.var), "ret_count": stats.ret_rms.count}))
+    (folder / "vecnormalize.pkl").unlink()
+    with pytest.raises(CheckpointError, match="earlier format.*upgrade_checkpoint"):
+        load_policy(folder)
+    assert upgrade_checkpoint(folder) == folder / "vecnormalize.pkl"
+    upgraded = read_vecnormalize(folder / "vecnormalize.pkl")
+    np.testing.assert_array_equal(upgraded.obs_rms.mean, stats.obs_rms.mean)  # bit for bit
+    np.testing.assert_array_equal(upgraded.obs_rms.var, stats.obs_rms.var)
+    obs = np.asarray(json.loads((folder / "policy.json").read_text())["check"]["observations"], dtype=np.float32)
+    np.testing.assert_array_equal(load_policy(folder).predict(obs)[0], load_policy(checkpoint).predict(obs)[0])

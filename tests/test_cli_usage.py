@@ -99,3 +99,14 @@ def test_readme_checks_every_input_before_writing(tmp_path, capsys):
 def test_notebooks_checks_its_paths_before_running_any(tmp_path, capsys):
     assert main(["notebooks", str(tmp_path / "missing.ipynb")]) == 2
     assert "missing.ipynb: not a notebook file" in _one_line_error(capsys, "notebooks")
+
+
+def test_ctrl_c_in_any_command_ends_without_a_traceback(monkeypatch, capsys):
+    import wall_inspector.demo
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(wall_inspector.demo, "run", interrupted)
+    assert main(["demo"]) == 130
+    assert capsys.readouterr().err == "wall-inspector demo: interrupted\n"
