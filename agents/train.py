@@ -465,27 +465,41 @@ def ship(run_dir: Path, task: str, residual: str | None = None) -> Path:
 def _usage(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
     """The configuration and run folder the arguments ask for; ``ValueError`` for anything
     unusable, before any folder or process exists."""
-    if args.resume:
-        run_dir = Path(args.resume)
-        if not (run_dir / "config.yaml").is_file():
-            raise ValueError(f"cannot resume: {run_dir / 'config.yaml'} does not exist")
-        changing = [flag for flag, value in (("--env", args.env), ("--config", args.config), ("--n-envs", args.n_envs),
-                                             ("--seed", args.seed), ("--randomize", args.randomize),
-                                             ("--residual", args.residual), ("--set", args.set or None),
-                                             ("--out", args.out)) if value is not None]
-        if changing:
-            raise ValueError(f"--resume continues the saved configuration; drop {', '.join(changing)}")
-        config = load_config(run_dir / "config.yaml", validate=False)
-        for key, value in (("timesteps", args.timesteps), ("n_workers", args.workers),
-                           ("checkpoint_freq", args.checkpoint_freq), ("checkpoint_minutes", args.checkpoint_minutes)):
-            if value is not None:
-                config[key] = value
-        validate_config(config)
-        start = _latest_checkpoint(run_dir)
-        from agents.checkpoints import read_json
+    config, out = _resumed_run(args) if args.resume else _new_run(args)
+    if args.ship:
+        git = git_state()
+        if git is not None and git["uncommitted"]:
+            raise ValueError(f"--ship records the git commit in the model card, but {', '.join(git['uncommitted'])} "
+                             "differ from it; commit first (or train without --ship and ship a clean run)")
+    return config, out
 
-        planned_timesteps(config, int(read_json(start / "policy.json").get("num_timesteps", 0)))
-        return config, run_dir
+
+def _resumed_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
+    """The saved configuration of ``--resume DIR``, with the flags a resumed run may change."""
+    run_dir = Path(args.resume)
+    if not (run_dir / "config.yaml").is_file():
+        raise ValueError(f"cannot resume: {run_dir / 'config.yaml'} does not exist")
+    changing = [flag for flag, value in (("--env", args.env), ("--config", args.config), ("--n-envs", args.n_envs),
+                                         ("--seed", args.seed), ("--randomize", args.randomize),
+                                         ("--residual", args.residual), ("--set", args.set or None),
+                                         ("--out", args.out)) if value is not None]
+    if changing:
+        raise ValueError(f"--resume continues the saved configuration; drop {', '.join(changing)}")
+    config = load_config(run_dir / "config.yaml", validate=False)
+    for key, value in (("timesteps", args.timesteps), ("n_workers", args.workers),
+                       ("checkpoint_freq", args.checkpoint_freq), ("checkpoint_minutes", args.checkpoint_minutes)):
+        if value is not None:
+            config[key] = value
+    validate_config(config)
+    from agents.checkpoints import read_json
+
+    start = _latest_checkpoint(run_dir)
+    planned_timesteps(config, int(read_json(start / "policy.json").get("num_timesteps", 0)))
+    return config, run_dir
+
+
+def _new_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
+    """The configuration of a new run from the flags, and its (creatable) folder."""
     if not args.out:
         raise ValueError("--out is required (the run folder)")
     out = Path(args.out)
@@ -494,11 +508,6 @@ def _usage(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
     config = _config_from_args(args)
     planned_timesteps(config)
     check_output_folder(out, "--out")
-    if args.ship:
-        git = git_state()
-        if git is not None and git["uncommitted"]:
-            raise ValueError(f"--ship records the git commit in the model card, but {', '.join(git['uncommitted'])} "
-                             "differ from it; commit first (or train without --ship and ship a clean run)")
     return config, out
 
 

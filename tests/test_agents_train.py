@@ -244,3 +244,13 @@ def test_short_run_keeps_to_its_steps_checkpoints_by_wall_time_and_an_honest_car
         assert isinstance(git["git_uncommitted"], list)
         md = (tmp_path / "hover" / "model_card.md").read_text()
         assert all(name in md for name in git["git_uncommitted"])
+
+
+def test_resumed_run_is_not_shipped_from_a_dirty_tree_either(cli_run, monkeypatch, capsys):
+    import agents.train
+
+    monkeypatch.setattr(agents.train, "git_state", lambda: {"commit": "abc", "uncommitted": ["wall_env/env.py"]})
+    before = sorted(p.name for p in cli_run.rglob("*"))
+    assert main(["train", "--resume", str(cli_run), "--timesteps", "9216", "--ship"]) == 2
+    assert "wall_env/env.py differ from it; commit first" in capsys.readouterr().err
+    assert sorted(p.name for p in cli_run.rglob("*")) == before  # nothing trained, nothing written
