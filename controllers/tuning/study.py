@@ -28,6 +28,7 @@ from typing import Any
 
 from controllers.presets import METHOD_LABELS, ControllerPreset, load_preset
 from controllers.tuning.objective import (
+    ALONG_WALL_PRICE,
     CONTACT_PRICE_CM,
     RATE_EFFORT_PRICE_CM,
     THRUST_EFFORT_PRICE_CM,
@@ -267,7 +268,8 @@ class Tuner:
         if self.objective.name == "paper-table-i":
             return ("over Table I's MPC (k_s 1, 4, 10 N/m) and SC-MPC (k_s 10 N/m) cells: max |ln(wall-normal RMSE "
                     "/ paper RMSE)| + 0.1 mean ln(wall-normal RMSE / paper RMSE)^2")
-        return (f"mean over flights of wall-normal RMSE (cm) + {CONTACT_PRICE_CM} cm per contact step + "
+        return (f"mean over flights of wall-normal RMSE (cm) + {ALONG_WALL_PRICE} x RMSE along the wall (cm) + "
+                f"{CONTACT_PRICE_CM} cm per contact step + "
                 f"{RATE_EFFORT_PRICE_CM} cm per rad/s RMS body-rate command + {THRUST_EFFORT_PRICE_CM} cm per N "
                 "RMS thrust command away from hover")
 
