@@ -36,14 +36,15 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from controllers.evaluation import EvaluationResult, evaluate
+from controllers.evaluation import EpisodeRecord, EvaluationResult, evaluate
 from controllers.mpc.cost import MPCWeights
 from controllers.mpc.policy import MPC, SCMPC
 from controllers.pid import PID
 
 __all__ = [
     "Scenario", "ScenarioResult", "TABLE_I", "TABLE_II", "TABLE_I_SEEDS", "TABLE_II_SEEDS", "PAPER_VALUES",
-    "TABLE_I_STANDOFF", "controller_policies", "run_scenarios", "markdown_tables", "acceptance", "markdown_checks", "write_outputs",
+    "TABLE_I_STANDOFF", "Flight", "FlightExecutor", "fly", "table_flights", "controller_policies", "run_scenarios",
+    "markdown_tables", "acceptance", "markdown_checks", "results_json", "timing_json", "write_outputs",
 ]
 
 TABLE_I_SEEDS = tuple(range(5))
@@ -158,9 +159,48 @@ class ScenarioResult:
         return self.evaluation.metrics()
 
 
+@dataclass(frozen=True)
+class Flight:
+    """One flight of a table: ``policy`` (its name; ``factory`` makes it) on ``scenario`` with ``seed``.
+
+    :func:`fly` flies it on its own (a fresh env and a fresh policy), so that flights can
+    run anywhere in any order (e.g. as Ray tasks); a policy's memory is reset at every
+    episode start, so a flight's record does not depend on the flights before it.
+    """
+
+    scenario: Scenario
+    policy: str
+    factory: PolicyFactory
+    seed: int
+
+
+def fly(flight: Flight) -> EpisodeRecord:
+    """Fly one :class:`Flight` in this process and return its record."""
+    def make_policy(env):
+        return _call_factory(flight.factory, env, flight.scenario)
+
+    return evaluate(make_policy, flight.scenario.env_id, [flight.seed], flight.scenario.make_kwargs()).episodes[0]
+
+
+FlightExecutor = Callable[[Sequence[Flight], Callable[[], object]], Sequence[EpisodeRecord]]
+"""``executor(flights, on_flight)``: fly every flight anywhere, call ``on_flight()`` after each, return
+the records in the order of ``flights``."""
+
+
+def table_flights(scenarios: Sequence[Scenario], policies: Mapping[str, PolicyFactory]) -> list[Flight]:
+    """Every (scenario, policy, seed) flight of the tables, in the tables' order."""
+    return [Flight(scenario, name, factory, int(seed)) for scenario in scenarios for name, factory in policies.items()
+            for seed in scenario.seeds]
+
+
 def run_scenarios(scenarios: Sequence[Scenario], policies: Mapping[str, PolicyFactory],
-                  progress: bool = True) -> list[ScenarioResult]:
-    """Fly every policy on every scenario's seeds; a tqdm bar counts the flights."""
+                  progress: bool = True, executor: FlightExecutor | None = None) -> list[ScenarioResult]:
+    """Fly every policy on every scenario's seeds; a tqdm bar counts the flights.
+
+    By default in this process: one policy per scenario and policy, flying the seeds one
+    after another. ``executor`` flies the :func:`table_flights` elsewhere instead (each
+    flight on its own, see :class:`Flight`), e.g. as Ray tasks; the results are the same.
+    """
     from tqdm import tqdm
 
     if not policies:
@@ -168,6 +208,18 @@ def run_scenarios(scenarios: Sequence[Scenario], policies: Mapping[str, PolicyFa
     total = sum(len(s.seeds) for s in scenarios) * len(policies)
     results = []
     with tqdm(total=total, unit="flight", disable=not progress, dynamic_ncols=True) as bar:
+        if executor is not None:
+            flights = table_flights(scenarios, policies)
+            records = list(executor(flights, lambda: bar.update(1)))
+            if len(records) != len(flights):
+                raise RuntimeError(f"the flight executor returned {len(records)} records for {len(flights)} flights")
+            for scenario in scenarios:
+                for name in policies:
+                    episodes = [r for f, r in zip(flights, records) if f.scenario is scenario and f.policy == name]
+                    evaluation = EvaluationResult(name, scenario.env_id, scenario.make_kwargs(),
+                                                  [int(s) for s in scenario.seeds], episodes)
+                    results.append(ScenarioResult(scenario, name, evaluation))
+            return results
         for scenario in scenarios:
             for name, factory in policies.items():
                 bar.set_description(f"{name} on {scenario.env_id.split('/')[-1]} k_s={scenario.k_s:g}")
@@ -313,9 +365,36 @@ def _scenario_dict(s: Scenario) -> dict[str, Any]:
     return data
 
 
+TIMING_KEYS = ("solve_ms",)
+"""Metrics that measure time (the MPCs' solve times): they differ from run to run and machine to machine,
+so they go to ``timing.json``, not ``results.json``, which depends on the seeds and settings alone."""
+
+
+def _without_timing(metrics: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in metrics.items() if k not in TIMING_KEYS}
+
+
+def _timing(metrics: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in metrics.items() if k in TIMING_KEYS}
+
+
 def results_json(results: Sequence[ScenarioResult]) -> dict[str, Any]:
-    return {"runs": [{"scenario": _scenario_dict(r.scenario), "policy": r.policy, "metrics": r.metrics(),
-                      "per_episode": r.evaluation.per_episode()} for r in results]}
+    """Every run's pooled and per-flight metrics, timing left out (see :func:`timing_json`): the same
+    seeds and settings give the same JSON, byte for byte, wherever and in whatever order the flights ran."""
+    return {"runs": [{"scenario": _scenario_dict(r.scenario), "policy": r.policy,
+                      "metrics": _without_timing(r.metrics()),
+                      "per_episode": [_without_timing(e) for e in r.evaluation.per_episode()]} for r in results]}
+
+
+def timing_json(results: Sequence[ScenarioResult]) -> dict[str, Any]:
+    """The timing metrics (solve times) of the runs that have them, pooled and per flight."""
+    runs = []
+    for r in results:
+        pooled = _timing(r.metrics())
+        if pooled:
+            runs.append({"scenario": r.scenario.name, "policy": r.policy, **pooled,
+                         "per_episode": [{"seed": e["seed"], **_timing(e)} for e in r.evaluation.per_episode()]})
+    return {"runs": runs}
 
 
 def _plot_table_i(results: Sequence[ScenarioResult], path: Path, seed_index: int = 0) -> None:
@@ -382,7 +461,8 @@ def markdown_checks(checks: Sequence[dict[str, Any]]) -> str:
 def write_outputs(results: Sequence[ScenarioResult], out_dir: str | Path, note: str = "",
                   extra_checks: Sequence[dict[str, Any]] = (), table_i_paper_match: bool = False,
                   extra_markdown: str = "") -> dict[str, Path]:
-    """Write ``tables.md``, ``results.json`` and the figures to ``out_dir``; return their paths.
+    """Write ``tables.md``, ``results.json``, ``timing.json`` (solve times) and the figures to ``out_dir``;
+    return their paths.
 
     ``note`` heads the Markdown and is stored in the JSON (e.g. the preset flown);
     ``extra_checks`` (same form as :func:`acceptance`'s) follow the paper's checks in both;
@@ -390,12 +470,13 @@ def write_outputs(results: Sequence[ScenarioResult], out_dir: str | Path, note: 
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"markdown": out / "tables.md", "json": out / "results.json"}
+    paths = {"markdown": out / "tables.md", "json": out / "results.json", "timing": out / "timing.json"}
     checks = acceptance(results, table_i_paper_match) + list(extra_checks)
     parts = [markdown_tables(results, note), extra_markdown, markdown_checks(checks)]
     paths["markdown"].write_text("\n".join(p for p in parts if p))
     paths["json"].write_text(json.dumps({"note": note, **results_json(results), "acceptance": checks},
                                         indent=2, default=float))
+    paths["timing"].write_text(json.dumps(timing_json(results), indent=2, default=float))
     table_i = [r for r in results if r.scenario.table == "I"]
     table_ii = [r for r in results if r.scenario.table == "II"]
     if table_i:

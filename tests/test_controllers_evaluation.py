@@ -169,7 +169,7 @@ def test_compare_command_writes_its_outputs(tmp_path, capsys):
     assert any(c["check"] == "Table II: MPC / MPC (authors') wall-normal RMSE <= 1" for c in checks)
     assert {r["method"] for r in data["budgets"]} == {"PID", "MPC", "SC-MPC", "PPO"}
     assert sum(line.startswith("- ") for line in (tmp_path / "tables.md").read_text().splitlines()) == len(checks) == 8
-    assert {p.name for p in tmp_path.iterdir()} == {"tables.md", "results.json", "table_i_circle.png",
+    assert {p.name for p in tmp_path.iterdir()} == {"tables.md", "results.json", "timing.json", "table_i_circle.png",
                                                    "table_ii_sweep.png"}
 
 

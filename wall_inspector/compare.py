@@ -6,7 +6,10 @@ writes to ``--out``:
 
 - ``tables.md``: the tables, the tuning budgets and the checks
   (``wall-inspector readme --set compare=OUT/tables.md`` copies them into the README);
-- ``results.json``: pooled and per-flight metrics of every run, the budgets and the checks;
+- ``results.json``: pooled and per-flight metrics of every run, the budgets and the checks: the same
+  seeds and settings give the same file, byte for byte, wherever the flights ran;
+- ``timing.json``: what measures time, so differs from run to run: the MPCs' solve times
+  (pooled and per flight) and the wall time of the flights;
 - ``table_i_circle.png`` (paper Fig. 6) and ``table_ii_sweep.png`` (paper Fig. 10).
 
 Controllers fly the preset of ``--weights`` (:mod:`controllers.presets`): by default
@@ -21,11 +24,15 @@ II, and in Table II also the residual agent that corrects SC-MPC ("PPO + SC-MPC"
 SC-MPC base keeps the settings it was trained with). ``--no-ppo`` leaves them out. A
 table of each method's optimisation budget (tuning trials, env steps, wall time;
 PPO's training) stands beside the results.
+
+``--ray [ADDRESS]`` flies every (method, scenario, seed) flight as a Ray task
+(:mod:`wall_inspector.ray_backend`): on an embedded Ray of this machine, or on a cluster.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import sys
@@ -51,6 +58,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "names are the fields of controllers.mpc.MPCWeights (sensitivity studies, not the paper)")
     parser.add_argument("--no-ppo", action="store_true", help="leave out the shipped PPO agents")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    from wall_inspector import ray_backend
+
+    ray_backend.add_arguments(parser, "every (method, scenario, seed) flight is a Ray task; same tables and JSON")
 
 
 class UsageError(ValueError):
@@ -204,7 +214,10 @@ def run(args: argparse.Namespace) -> int:
         out = Path(args.out)
         if out.exists() and not out.is_dir():
             raise UsageError(f"--out {out} exists and is not a folder")
-    except UsageError as exc:
+        from wall_inspector import ray_backend
+
+        ray_backend.check_arguments(args)
+    except (UsageError, ValueError) as exc:
         return _error(str(exc))
 
     mpc_weights = (lambda w: dataclasses.replace(w, **changes)) if changes else None
@@ -212,13 +225,22 @@ def run(args: argparse.Namespace) -> int:
     if args.weights != "paper" and not args.no_authors:
         policies.update(pt.controller_policies("paper", label_suffix=pt.AUTHORS, dynamics_only=False))
     note = _preset_note(args.weights, changes)
-    t0 = time.perf_counter()
-    results = []
-    for table in ("I", "II"):
-        chosen = [s for s in scenarios if s.table == table]
-        if chosen:
-            ppo = {} if args.no_ppo else _ppo_policies(chosen[0].env_id, residual=table == "II")
-            results += pt.run_scenarios(chosen, {**policies, **ppo}, progress=not args.no_progress)
+    with contextlib.ExitStack() as stack:
+        executor = None
+        if args.ray is not None:
+            from wall_inspector import ray_backend
+
+            stack.enter_context(ray_backend.session(args.ray, args.ray_cpus))
+            executor = ray_backend.flight_executor()
+        t0 = time.perf_counter()
+        results = []
+        for table in ("I", "II"):
+            chosen = [s for s in scenarios if s.table == table]
+            if chosen:
+                ppo = {} if args.no_ppo else _ppo_policies(chosen[0].env_id, residual=table == "II")
+                results += pt.run_scenarios(chosen, {**policies, **ppo}, progress=not args.no_progress,
+                                            executor=executor)
+        flying_s = time.perf_counter() - t0
     budget_rows = budgets(args.weights, tasks, with_ppo=not args.no_ppo)
     paths = pt.write_outputs(results, out, note, extra_checks=_ppo_acceptance(results),
                              table_i_paper_match=args.weights == "paper-sim",
@@ -227,6 +249,11 @@ def run(args: argparse.Namespace) -> int:
     data["budgets"] = budget_rows
     data["preset"] = args.weights
     paths["json"].write_text(json.dumps(data, indent=2))
+    timing = json.loads(paths["timing"].read_text())
+    flights = sum(len(r.evaluation.episodes) for r in results)
+    timing["flights"] = {"count": flights, "wall_time_s": round(flying_s, 3),
+                         "executor": "in this process" if args.ray is None else f"Ray ({args.ray})"}
+    paths["timing"].write_text(json.dumps(timing, indent=2))
     print(paths["markdown"].read_text())
-    print(f"{len(results)} runs in {time.perf_counter() - t0:.0f} s; wrote " + ", ".join(str(p) for p in paths.values()))
+    print(f"{len(results)} runs ({flights} flights) in {flying_s:.0f} s; wrote " + ", ".join(str(p) for p in paths.values()))
     return 0

@@ -13,6 +13,9 @@ its provenance: task, seeds, budget, objective values, command, commit) and
 ``OUT/report.json`` are written; ``--ship`` also copies the preset to
 ``controllers/presets/tuned/<task>_<method>.yaml`` (``paper-sim.yaml`` for the Table I
 objective), where ``from_env`` and ``compare`` find it.
+
+``--ray [ADDRESS]`` runs the same study through Ray Tune's Optuna searcher, trials side
+by side on this machine or a cluster (:mod:`wall_inspector.tune_on_ray`).
 """
 
 from __future__ import annotations
@@ -53,6 +56,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="run folder (default runs/tune/<task>_<method>)")
     parser.add_argument("--ship", action="store_true", help="copy the preset into controllers/presets")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    from wall_inspector import ray_backend
+
+    ray_backend.add_arguments(parser, "every trial is a Ray Tune trial, searched by Ray Tune's Optuna searcher")
+    parser.add_argument("--cpus-per-trial", type=float, default=1.0,
+                        help="with --ray: CPUs Ray reserves for each trial (default 1: a trial flies one flight at a time)")
 
 
 def parse_seeds(text: str, option: str) -> list[int]:
@@ -134,6 +142,11 @@ def run(args: argparse.Namespace) -> int:
         out = Path(args.out) if args.out else Path("runs") / "tune" / slug
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out} exists and is not a folder")
+        from wall_inspector import ray_backend
+
+        ray_backend.check_arguments(args)
+        if not 0.01 <= args.cpus_per_trial <= 1024:
+            raise ValueError(f"--cpus-per-trial must be in [0.01, 1024], got {args.cpus_per_trial}")
     except (ValueError, TypeError) as exc:
         return _error(str(exc))
 
@@ -144,7 +157,13 @@ def run(args: argparse.Namespace) -> int:
                   budget_minutes=args.budget_minutes or None, seed=args.sampler_seed, space=space, command=command,
                   progress=not args.no_progress, start=args.start)
     try:
-        result = tuner.run()
+        if args.ray is None:
+            result = tuner.run()
+        else:
+            from wall_inspector import tune_on_ray
+
+            with ray_backend.session(args.ray, args.ray_cpus):
+                result = tune_on_ray.run(tuner, cpus_per_trial=args.cpus_per_trial, progress=not args.no_progress)
     except KeyboardInterrupt:
         print(f"\ninterrupted: the study is stored in {out / 'study.db'}; run the same command again to resume",
               file=sys.stderr)

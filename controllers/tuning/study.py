@@ -133,6 +133,22 @@ class Tuner:
         self.progress = progress
 
     # ------------------------------------------------------------------ the study
+    def open_study(self):
+        """The stored Optuna study of ``run_dir`` (created, or loaded to resume; its signature checked).
+
+        For other drivers of the same study (e.g. Ray Tune in ``wall-inspector tune --ray``), with
+        :meth:`start_values`, :meth:`remaining` and :meth:`finish`.
+        """
+        return self._study()
+
+    def start_values(self) -> list[dict[str, Any]]:
+        """The searched values of the first trials: the authors' settings, then each ``start`` preset's."""
+        return [self.space.values_of(preset.methods[self.space.method]) for preset in [self.base, *self.start]]
+
+    def finish(self, study) -> TuningResult:
+        """Fly the best trial of ``study`` on the held-out seeds and write the preset and the report."""
+        return self._finish(study)
+
     def _study(self):
         import optuna
 
@@ -177,9 +193,8 @@ class Tuner:
         optuna.logging.set_verbosity(optuna.logging.WARNING)
         study = self._study()
         if not study.trials:
-            for preset in [self.base, *self.start]:
-                study.enqueue_trial(self.space.values_of(preset.methods[self.space.method]),
-                                    user_attrs={"start": f"preset {preset.name}"})
+            for preset, values in zip([self.base, *self.start], self.start_values()):
+                study.enqueue_trial(values, user_attrs={"start": f"preset {preset.name}"})
         done, _, _ = self._done(study)
         left_trials, left_seconds = self.remaining(study)
         total = self.budget_trials if self.budget_trials is not None else None

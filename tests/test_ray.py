@@ -1,0 +1,98 @@
+"""``--ray``: compare and tune on a local two-node Ray cluster give what the local commands give.
+
+The cluster (``ray.cluster_utils.Cluster``: a head and a worker node, one CPU each, no
+dashboard) is started once for the module and shut down at its end.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import optuna
+import pytest
+import ray
+from ray.cluster_utils import Cluster
+
+from wall_inspector.cli import main as cli_main
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    cluster.add_node(num_cpus=1)
+    cluster.wait_for_nodes()
+    try:
+        yield cluster
+    finally:
+        if ray.is_initialized():
+            ray.shutdown()
+        cluster.shutdown()
+
+
+def test_nothing_imports_ray_without_the_flag():
+    code = ("import sys, wall_inspector.cli, wall_inspector.compare, wall_inspector.tune, wall_inspector.ray_backend, "
+            "controllers.paper_tables, controllers.tuning, agents.train; "
+            "import argparse; p = argparse.ArgumentParser(); wall_inspector.compare.add_arguments(p); "
+            "print('ray' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--ray-cpus", "2"], "--ray-cpus needs --ray"),
+    (["--ray", "auto", "--ray-cpus", "2"], "--ray-cpus sets the CPUs of an embedded Ray"),
+    (["--ray", "--ray-cpus", "0"], "--ray-cpus must be in [1, 4096]"),
+])
+def test_bad_ray_options_are_one_line_usage_errors(tmp_path, capsys, args, message):
+    assert cli_main(["compare", "--out", str(tmp_path / "x"), *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "x").exists()
+
+
+def test_compare_on_a_two_node_cluster_writes_the_local_json_byte_for_byte(cluster, tmp_path):
+    common = ["compare", "--seeds-i", "1", "--seeds-ii", "2", "--duration", "0.4", "--no-progress", "--no-authors"]
+    assert cli_main([*common, "--out", str(tmp_path / "local")]) == 0
+    assert cli_main([*common, "--out", str(tmp_path / "ray"), "--ray", cluster.address]) == 0
+    local, remote = (tmp_path / "local" / "results.json").read_bytes(), (tmp_path / "ray" / "results.json").read_bytes()
+    assert local == remote
+    assert (tmp_path / "local" / "tables.md").read_bytes() == (tmp_path / "ray" / "tables.md").read_bytes()
+    data = json.loads(local)
+    # 3 Table I rows x 5 policies (PID, MPC, SC-MPC both forms, PPO) + Table II's 6 (and PPO + SC-MPC)
+    assert len(data["runs"]) == 3 * 5 + 6
+    assert [e["seed"] for e in data["runs"][-1]["per_episode"]] == [0, 1]
+    assert all(run["metrics"]["steps"] == 40 * len(run["per_episode"]) for run in data["runs"])
+    assert "solve_ms" not in local.decode()  # timing lives in timing.json
+    timing = json.loads((tmp_path / "ray" / "timing.json").read_text())
+    sc = next(r for r in timing["runs"] if r["policy"] == "SC-MPC" and "Table II" in r["scenario"])
+    assert sc["solve_ms"]["count"] == 80 and 0 < sc["solve_ms"]["median"] < 100
+    assert [e["solve_ms"]["count"] for e in sc["per_episode"]] == [40, 40]
+    assert timing["flights"]["count"] == 3 * 5 + 6 * 2 and timing["flights"]["executor"].startswith("Ray")
+    assert not ray.is_initialized()  # the command disconnected; the cluster goes on
+
+
+def test_tune_through_ray_tunes_optuna_searcher(cluster, tmp_path):
+    out = tmp_path / "tune"
+    code = cli_main(["tune", "--env", "WallHover-v0", "--method", "pid", "--budget-trials", "3", "--seeds", "1000",
+                     "--heldout-seeds", "2000", "--set", "duration=0.3", "--out", str(out), "--no-progress",
+                     "--ray", cluster.address])
+    assert code == 0
+    study = optuna.load_study(study_name="tune", storage=f"sqlite:///{out / 'study.db'}")
+    trials = study.trials
+    assert [t.state for t in trials] == [optuna.trial.TrialState.COMPLETE] * 3
+    assert study.user_attrs["env_steps"] == 3 * 30
+    from controllers.presets import load_preset
+    from controllers.tuning import SearchSpace
+
+    space = SearchSpace("pid", load_preset("paper", method="pid").methods["pid"])
+    authors = space.values_of(space.base)
+    assert any(t.params == pytest.approx(authors) for t in trials)  # the authors' settings are a trial
+    preset = load_preset(out / "preset.yaml")
+    assert preset.provenance["used"]["trials"] == 3 and preset.provenance["used"]["env_steps"] == 90
+    best = min(trials, key=lambda t: t.value)
+    assert preset.methods["pid"]["kp"][0] == pytest.approx(best.params["kp_xy"])
+    report = json.loads((out / "report.json").read_text())
+    assert report["best_trial"] == best.number and len(report["trials"]) == 3
