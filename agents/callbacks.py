@@ -71,8 +71,9 @@ class PeriodicCheckpoint(BaseCallback):
     so that a long run loses little however it ends."""
 
     def __init__(self, folder: Path, every: int, policy_info: dict[str, Any], clock: TrainingClock,
-                 check_observations: np.ndarray, every_s: float = 0.0):
+                 check_observations: np.ndarray, every_s: float = 0.0, on_save: Callable[[Path], object] | None = None):
         super().__init__()
+        self.on_save = on_save  # called with each checkpoint folder written (e.g. to hand it to Ray Tune)
         self.folder, self.every, self.every_s = Path(folder), int(every), float(every_s)
         self.policy_info, self.clock, self.check_observations = policy_info, clock, check_observations
         self._next_steps = 0
@@ -101,6 +102,8 @@ class PeriodicCheckpoint(BaseCallback):
                         self.check_observations)
         self._last_save = time.perf_counter()
         self.saved.append(folder)
+        if self.on_save is not None:
+            self.on_save(folder)
         return folder
 
 

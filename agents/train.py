@@ -50,6 +50,7 @@ import shlex
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -292,10 +293,13 @@ class TrainingRun:
 
 
 def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, progress_bar: bool = True,
-          verbose: int = 1, command: str | None = None, checks: np.ndarray | None = None) -> TrainingRun:
+          verbose: int = 1, command: str | None = None, checks: np.ndarray | None = None,
+          on_checkpoint: Callable[[Path], object] | None = None) -> TrainingRun:
     """Train (or, with ``resume``, continue) a run in ``out_dir``.
 
     ``checks``: the observations of :func:`check_observations` if already computed.
+    ``on_checkpoint``: called with every periodic checkpoint folder right after it is written
+    (``wall-inspector train --ray`` hands them to Ray Tune, to resume a trial whose worker died).
 
     Raises :class:`TrainingInterrupted` on Ctrl-C, after saving a checkpoint to resume from.
     """
@@ -361,7 +365,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                 evaluation.evaluations_results = [list(r) for r in history["results"]]
                 evaluation.evaluations_length = [list(n) for n in history["ep_lengths"]]
         periodic = PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks,
-                                      every_s=60.0 * float(config["checkpoint_minutes"]))
+                                      every_s=60.0 * float(config["checkpoint_minutes"]), on_save=on_checkpoint)
         callbacks = [evaluation, CollisionLog(), periodic]
         if progress_bar:
             callbacks.append(ProgressBar(target_steps, initial=start_steps))

@@ -7,8 +7,12 @@ dashboard) is started once for the module and shut down at its end.
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import sys
+import threading
+import time
 
 import optuna
 import pytest
@@ -96,3 +100,84 @@ def test_tune_through_ray_tunes_optuna_searcher(cluster, tmp_path):
     assert preset.methods["pid"]["kp"][0] == pytest.approx(best.params["kp_xy"])
     report = json.loads((out / "report.json").read_text())
     assert report["best_trial"] == best.number and len(report["trials"]) == 3
+
+
+# ====================================================================== train --ray
+TINY_TRAIN = ["train", "--env", "WallHover-v0", "--timesteps", "6144", "--n-envs", "2", "--workers", "1",
+              "--set", "ppo.n_steps=128", "--set", "ppo.batch_size=256", "--set", "ppo.n_epochs=1",
+              "--set", "card_eval.episodes=1", "--set", "env_kwargs.duration=1.0", "--eval-freq", "1000000",
+              "--checkpoint-freq", "512", "--no-progress", "--quiet"]
+
+
+def test_train_plans_one_run_per_seed_and_sweep_point(tmp_path):
+    import argparse
+
+    from wall_inspector import train as train_command
+    from wall_inspector.train_on_ray import plan
+
+    space = tmp_path / "space.yaml"
+    space.write_text("ppo.learning_rate: [1.0e-4, 3.0e-4]\nppo.n_epochs: [1]\n")
+    parser = argparse.ArgumentParser()
+    train_command.add_arguments(parser)
+    args = parser.parse_args([*TINY_TRAIN[1:], "--seeds", "0-2", "--sweep", str(space), "--out", str(tmp_path / "o"),
+                              "--ray"])
+    runs = plan(args)
+    assert len(runs) == 6 and len({r["name"] for r in runs}) == 6
+    assert sorted((r["config"]["seed"], r["config"]["ppo"]["learning_rate"]) for r in runs) == [
+        (s, lr) for s in (0, 1, 2) for lr in (1e-4, 3e-4)]
+    assert all(r["config"]["ppo"]["n_epochs"] == 1 for r in runs)
+    assert runs[0]["command"].startswith("wall-inspector train --env WallInspector/WallHover-v0 --timesteps 6144")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--seeds", "0-1"], "--seeds needs --ray"),
+    (["--ray", "--seeds", "x"], "--seeds must be seeds such as"),
+    (["--ray", "--sweep", "/nonexistent.yaml"], "--sweep /nonexistent.yaml: no such file"),
+    (["--ray", "--ship"], "--ship is for a single run"),
+])
+def test_bad_train_ray_options_are_one_line_usage_errors(tmp_path, capsys, args, message):
+    out = tmp_path / "runs"
+    assert cli_main([*TINY_TRAIN, "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def _kill_a_trial_after_its_first_checkpoint(storage, killed: list, stop: threading.Event) -> None:
+    """SIGKILL the Ray worker of the first trial that has handed over a checkpoint."""
+    while not stop.is_set():
+        for results in sorted(storage.glob("ray/ray/*/result.json")):
+            lines = [json.loads(line) for line in results.read_text().splitlines() if line.strip()]
+            if lines and not lines[-1]["finished"] and list(results.parent.glob("checkpoint_*")):
+                os.kill(int(lines[-1]["pid"]), signal.SIGKILL)
+                killed.append((results.parent.name, int(lines[-1]["timesteps"])))
+                return
+        time.sleep(0.05)
+
+
+def test_train_sweep_of_two_trials_survives_a_killed_worker(cluster, tmp_path):
+    space = tmp_path / "space.yaml"
+    space.write_text("ppo.learning_rate: [3.0e-4, 1.0e-3]\n")
+    out = tmp_path / "runs"
+    killed: list = []
+    stop = threading.Event()
+    killer = threading.Thread(target=_kill_a_trial_after_its_first_checkpoint, args=(out, killed, stop), daemon=True)
+    killer.start()
+    try:
+        code = cli_main([*TINY_TRAIN, "--sweep", str(space), "--out", str(out), "--ray", cluster.address,
+                         "--cpus-per-trial", "1"])
+    finally:
+        stop.set()
+        killer.join()
+    assert code == 0 and len(killed) == 1
+    rows = json.loads((out / "summary.json").read_text())["runs"]
+    assert [r["set"] for r in rows] == [["ppo.learning_rate=0.0003"], ["ppo.learning_rate=0.001"]]
+    assert all(r["timesteps"] == 6144 for r in rows)
+    restarted = [r for r in rows if r["restarts"]]
+    assert len(restarted) == 1 and 512 <= restarted[0]["resumed_from"] < 6144  # from its last checkpoint
+    for r in rows:
+        card = json.loads((out / r["name"] / "model_card.json").read_text())
+        assert card["training"]["total_timesteps"] == 6144
+        assert card["training"]["resumed"] is bool(r["restarts"])
+        assert card["config"]["ppo"]["learning_rate"] in (3e-4, 1e-3)
+        assert (out / r["name"] / "best" / "model.zip").is_file()
+    assert "| [ppo.learning_rate=0.001](ppo.learning_rate=0.001/model_card.md) |" in (out / "summary.md").read_text()

@@ -1,0 +1,157 @@
+"""``wall-inspector bench-ray``: what Ray gains and costs for ``compare --ray``.
+
+Two figures, measured in one run on an embedded Ray of this machine:
+
+* **speed-up**: the default Table II of ``compare`` (every method of ``compare``'s
+  defaults: the tuned presets, the authors' settings, both SC-MPC forms, the shipped PPO
+  agents; 10 seeds) flown as Ray tasks on an embedded Ray with 1 CPU, then (a new Ray)
+  with 2 CPUs (``--cpus``); the wall time of the flights, Ray's start excluded, and the
+  ratio. The two runs' ``results.json`` content is compared too (it must be identical).
+* **overhead per flight**: one flight (SC-MPC on the sweep, seed 0) flown in this
+  process and as a Ray task on a warm worker (Ray started, the worker's imports done by
+  a first task), each ``--repeats`` times, interleaved; the overhead is the difference of
+  the medians.
+  The first task on a fresh worker (process start and imports) is reported too.
+
+Prints a table and writes ``OUT/bench_ray.json``. Figures depend on the machine's load:
+``uptime``'s load average is printed with them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+TARGETS = {"speedup_2_vs_1": 1.7, "overhead_s": 0.5}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cpus", default="1,2", help="CPU counts of the embedded Ray to compare (default 1,2)")
+    parser.add_argument("--seeds", type=int, default=10, help="seeds of Table II (default 10, compare's default)")
+    parser.add_argument("--duration", type=float, default=None, help="shorten every flight (s; default: the task's)")
+    parser.add_argument("--repeats", type=int, default=9, help="repetitions of the single flight (default 9)")
+    parser.add_argument("--skip-speedup", action="store_true", help="measure the overhead only")
+    parser.add_argument("--out", default="out/bench-ray", help="folder for bench_ray.json")
+
+
+def _load() -> str:
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "unknown"
+
+
+def _table_ii(seeds: int, duration: float | None) -> tuple[list[Any], dict[str, Any]]:
+    import dataclasses
+
+    from controllers import paper_tables as pt
+    from wall_inspector.compare import _ppo_policies
+
+    extra = {} if duration is None else {"duration": duration}
+    scenarios = [dataclasses.replace(s, seeds=tuple(range(seeds)), env_kwargs={**s.env_kwargs, **extra})
+                 for s in pt.TABLE_II]
+    policies = pt.controller_policies("tuned")
+    policies.update(pt.controller_policies("paper", label_suffix=pt.AUTHORS, dynamics_only=False))
+    policies.update(_ppo_policies(scenarios[0].env_id, residual=True))
+    return scenarios, policies
+
+
+def _speedup(cpu_counts: list[int], seeds: int, duration: float | None) -> dict[str, Any]:
+    from controllers import paper_tables as pt
+    from wall_inspector import ray_backend
+
+    scenarios, policies = _table_ii(seeds, duration)
+    runs: list[dict[str, Any]] = []
+    contents = []
+    for cpus in cpu_counts:
+        with ray_backend.session(ray_backend.LOCAL, cpus):
+            t0 = time.perf_counter()
+            results = pt.run_scenarios(scenarios, policies, progress=False, executor=ray_backend.flight_executor())
+            seconds = time.perf_counter() - t0
+        flights = sum(len(r.evaluation.episodes) for r in results)
+        runs.append({"cpus": cpus, "flights": flights, "wall_time_s": round(seconds, 2),
+                     "s_per_flight": round(seconds / flights, 3), "load_after": _load()})
+        contents.append(json.dumps(pt.results_json(results), sort_keys=True, default=float))
+        print(f"{cpus} CPU(s): {flights} flights in {seconds:.1f} s (load {_load()})", flush=True)
+    out: dict[str, Any] = {"runs": runs, "identical_results": len(set(contents)) == 1}
+    if len(runs) >= 2:
+        out["speedup"] = round(runs[0]["wall_time_s"] / runs[-1]["wall_time_s"], 3)
+    return out
+
+
+def _overhead(repeats: int, duration: float | None) -> dict[str, Any]:
+    import ray
+
+    from controllers import paper_tables as pt
+    from wall_inspector import ray_backend
+
+    scenarios, policies = _table_ii(1, duration)
+    flight = pt.Flight(scenarios[0], "SC-MPC", policies["SC-MPC"], 0)
+    pt.fly(flight)  # warm: compiled code loaded, caches filled
+    local, remote = [], []
+    with ray_backend.session(ray_backend.LOCAL, 1):
+        remote_fly = ray.remote(num_cpus=ray_backend.CPUS_PER_FLIGHT)(pt.fly)
+        t0 = time.perf_counter()
+        ray.get(remote_fly.remote(flight))
+        cold = time.perf_counter() - t0
+        for _ in range(repeats):  # interleaved, so that a change of the machine's load meets both alike
+            t0 = time.perf_counter()
+            pt.fly(flight)
+            local.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            ray.get(remote_fly.remote(flight))
+            remote.append(time.perf_counter() - t0)
+    local_s, remote_s = statistics.median(local), statistics.median(remote)
+    return {"flight": "SC-MPC, WallSweep-v0, seed 0", "steps": len(pt.fly(flight).time),
+            "local_median_s": round(local_s, 4), "ray_median_s": round(remote_s, 4),
+            "overhead_s": round(remote_s - local_s, 4), "first_task_s": round(cold, 3),
+            "first_task_overhead_s": round(cold - local_s, 3), "repeats": repeats}
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        cpu_counts = [int(c) for c in args.cpus.split(",") if c.strip()]
+        if not cpu_counts or any(not 1 <= c <= 4096 for c in cpu_counts):
+            raise ValueError
+    except ValueError:
+        raise SystemExit(f"--cpus must be CPU counts in [1, 4096] such as 1,2; got {args.cpus!r}") from None
+    if not 1 <= args.seeds <= 1000:
+        raise SystemExit(f"--seeds must be in [1, 1000], got {args.seeds}")
+    if not 1 <= args.repeats <= 100:
+        raise SystemExit(f"--repeats must be in [1, 100], got {args.repeats}")
+    if args.duration is not None and not 0.05 <= args.duration <= 3600:
+        raise SystemExit(f"--duration must be in [0.05, 3600] s, got {args.duration}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise SystemExit(f"--out {out} exists and is not a folder")
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        raise SystemExit('bench-ray needs Ray: pip install "wall-inspector[ray]"') from None
+
+    figures: dict[str, Any] = {"machine": f"{os.cpu_count()} CPUs", "load_before": _load()}
+    print(f"load average before: {figures['load_before']}", flush=True)
+    figures["overhead"] = _overhead(args.repeats, args.duration)
+    o = figures["overhead"]
+    print(f"one flight ({o['steps']} steps): {o['local_median_s']:.3f} s in this process, {o['ray_median_s']:.3f} s as a "
+          f"Ray task on a warm worker: overhead {o['overhead_s']:.3f} s (target <= {TARGETS['overhead_s']} s); "
+          f"first task on a new worker {o['first_task_s']:.2f} s", flush=True)
+    if not args.skip_speedup:
+        figures["speedup"] = _speedup(cpu_counts, args.seeds, args.duration)
+        s = figures["speedup"]
+        if "speedup" in s:
+            print(f"Table II ({s['runs'][0]['flights']} flights): {s['runs'][0]['wall_time_s']:.1f} s with "
+                  f"{s['runs'][0]['cpus']} CPU, {s['runs'][-1]['wall_time_s']:.1f} s with {s['runs'][-1]['cpus']}: "
+                  f"speed-up {s['speedup']:.2f}x (target >= {TARGETS['speedup_2_vs_1']}x); identical results: "
+                  f"{s['identical_results']}")
+    figures["load_after"] = _load()
+    print(f"load average after: {figures['load_after']}")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench_ray.json").write_text(json.dumps(figures, indent=2))
+    print(f"wrote {out / 'bench_ray.json'}")
+    return 0
