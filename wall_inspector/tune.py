@@ -90,10 +90,6 @@ def _env_kwargs(items: list[str]) -> dict:
     return out
 
 
-def _error(message: str) -> int:
-    print(f"wall-inspector tune: error: {message}", file=sys.stderr)
-    return 2
-
 
 def run(args: argparse.Namespace) -> int:
     import gymnasium as gym
@@ -135,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out} exists and is not a folder")
     except (ValueError, TypeError) as exc:
-        return _error(str(exc))
+        raise SystemExit(str(exc)) from None  # one line, exit status 2 (wall_inspector.cli)
 
     command = "wall-inspector tune " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 1 \
         and sys.argv[1] == "tune" else f"wall-inspector tune --env {env_id} --method {method}"
