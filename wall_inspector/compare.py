@@ -35,7 +35,6 @@ import argparse
 import contextlib
 import dataclasses
 import json
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -184,10 +183,6 @@ def budget_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _error(message: str) -> int:
-    print(f"wall-inspector compare: error: {message}", file=sys.stderr)
-    return 2
-
 
 def run(args: argparse.Namespace) -> int:
     from controllers import paper_tables as pt
@@ -218,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
 
         ray_backend.check_arguments(args)
     except (UsageError, ValueError) as exc:
-        return _error(str(exc))
+        raise SystemExit(str(exc)) from None  # one line, exit status 2 (wall_inspector.cli)
 
     mpc_weights = (lambda w: dataclasses.replace(w, **changes)) if changes else None
     policies = pt.controller_policies(args.weights, mpc_weights=mpc_weights)

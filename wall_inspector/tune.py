@@ -98,10 +98,6 @@ def _env_kwargs(items: list[str]) -> dict:
     return out
 
 
-def _error(message: str) -> int:
-    print(f"wall-inspector tune: error: {message}", file=sys.stderr)
-    return 2
-
 
 def run(args: argparse.Namespace) -> int:
     import gymnasium as gym
@@ -148,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
         if not 0.01 <= args.cpus_per_trial <= 1024:
             raise ValueError(f"--cpus-per-trial must be in [0.01, 1024], got {args.cpus_per_trial}")
     except (ValueError, TypeError) as exc:
-        return _error(str(exc))
+        raise SystemExit(str(exc)) from None  # one line, exit status 2 (wall_inspector.cli)
 
     command = "wall-inspector tune " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 1 \
         and sys.argv[1] == "tune" else f"wall-inspector tune --env {env_id} --method {method}"

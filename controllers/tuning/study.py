@@ -163,6 +163,7 @@ class Tuner:
         recorded = study.user_attrs.get("signature")
         if recorded is None:
             study.set_user_attr("signature", signature)
+            study.set_user_attr("commit", git_commit())  # the code the study runs (a resume may run later code)
         elif recorded != signature:
             raise ValueError(f"{self.run_dir} holds a study of {recorded}, not of {signature}; "
                              "use another --out folder")
@@ -261,7 +262,7 @@ class Tuner:
             "sampler": f"optuna TPESampler(seed={self.seed}), MedianPruner(n_startup_trials=8)",
             "start": [{"preset": p.name, "settings": p.methods[self.space.method]} for p in [self.base, *self.start]],
             "command": self.command,
-            "commit": git_commit(),
+            "commit": study.user_attrs.get("commit") or git_commit(),
             "date": time.strftime("%Y-%m-%d", time.gmtime()),
         }
         name = "paper-sim" if self.objective.name == "paper-table-i" else \
