@@ -75,6 +75,7 @@ def test_compare_on_a_two_node_cluster_writes_the_local_json_byte_for_byte(clust
     assert sc["solve_ms"]["count"] == 80 and 0 < sc["solve_ms"]["median"] < 100
     assert [e["solve_ms"]["count"] for e in sc["per_episode"]] == [40, 40]
     assert timing["flights"]["count"] == 3 * 5 + 6 * 2 and timing["flights"]["executor"].startswith("Ray")
+    assert len(timing["flights"]["seconds_each"]) == 27 and all(s > 0 for s in timing["flights"]["seconds_each"])
     assert not ray.is_initialized()  # the command disconnected; the cluster goes on
 
 
@@ -181,3 +182,10 @@ def test_train_sweep_of_two_trials_survives_a_killed_worker(cluster, tmp_path):
         assert card["config"]["ppo"]["learning_rate"] in (3e-4, 1e-3)
         assert (out / r["name"] / "best" / "model.zip").is_file()
     assert "| [ppo.learning_rate=0.001](ppo.learning_rate=0.001/model_card.md) |" in (out / "summary.md").read_text()
+
+
+def test_makespan_of_the_plan_is_list_scheduling():
+    from wall_inspector.bench_ray import makespan
+
+    assert makespan([3.0, 1.0, 1.0, 1.0], 2) == 3.0  # one slot takes the 3 s flight, the other the three 1 s ones
+    assert makespan([1.0] * 10, 4) == 3.0 and makespan([2.0] * 3, 16) == 2.0 and makespan([5.0, 5.0], 1) == 10.0

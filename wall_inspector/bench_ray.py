@@ -37,6 +37,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=int, default=9, help="repetitions of the single flight (default 9)")
     parser.add_argument("--skip-speedup", action="store_true", help="measure the overhead only")
     parser.add_argument("--out", default="out/bench-ray", help="folder for bench_ray.json")
+    parser.add_argument("--plan", metavar="TIMING.json", default=None,
+                        help="instead of measuring: estimate the wall time of the flights of a compare --ray run "
+                             "(its timing.json) and of a training sweep on --machines machines")
+    parser.add_argument("--machines", default="1,4,16", help="with --plan: machine counts (default 1,4,16)")
+    parser.add_argument("--cpus-per-machine", type=int, default=2, help="with --plan: CPUs of a machine (default 2)")
+    parser.add_argument("--trial-minutes", type=float, default=None,
+                        help="with --plan: measured wall time of one training run (a model card's), for the sweep")
+    parser.add_argument("--trials", type=int, default=10, help="with --plan: training runs of the sweep (default 10)")
+    parser.add_argument("--cpus-per-trial", type=int, default=2,
+                        help="with --plan: CPUs a training run reserves (default 2, train's n_workers)")
 
 
 def _load() -> str:
@@ -113,7 +123,53 @@ def _overhead(repeats: int, duration: float | None) -> dict[str, Any]:
             "first_task_overhead_s": round(cold - local_s, 3), "repeats": repeats}
 
 
+def makespan(seconds: list[float], slots: int) -> float:
+    """Wall time of jobs of ``seconds`` each on ``slots`` equal workers, started in the given order as
+    workers free up (Ray's way with tasks submitted at once)."""
+    import heapq
+
+    free = [0.0] * max(1, slots)
+    for s in seconds:
+        heapq.heapreplace(free, free[0] + s)
+    return max(free)
+
+
+def plan(args: argparse.Namespace) -> int:
+    """``--plan``: the estimates of the README from measured per-flight and per-trial times."""
+    try:
+        machines = [int(m) for m in args.machines.split(",") if m.strip()]
+        if not machines or any(m < 1 for m in machines):
+            raise ValueError
+    except ValueError:
+        raise SystemExit(f"--machines must be machine counts such as 1,4,16; got {args.machines!r}") from None
+    if not 1 <= args.cpus_per_machine <= 4096 or not 1 <= args.cpus_per_trial <= args.cpus_per_machine:
+        raise SystemExit("--cpus-per-machine must be in [1, 4096] and --cpus-per-trial in [1, --cpus-per-machine]")
+    try:
+        timing = json.loads(Path(args.plan).read_text())
+        seconds = [float(s) for s in timing["flights"]["seconds_each"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        raise SystemExit(f"--plan {args.plan}: not the timing.json of a compare --ray run (flights.seconds_each)") \
+            from None
+    print(f"{len(seconds)} flights, {sum(seconds):.0f} s of flying in all (longest {max(seconds):.1f} s), "
+          f"measured by a compare --ray run ({timing['flights']['executor']})")
+    print("| machines | CPUs | flights (min) | training sweep (min) |")
+    print("|---:|---:|---:|---:|")
+    rows = []
+    for m in machines:
+        flights_s = makespan(seconds, m * args.cpus_per_machine)
+        row = {"machines": m, "cpus": m * args.cpus_per_machine, "flights_min": round(flights_s / 60, 2)}
+        if args.trial_minutes is not None:
+            per_machine = args.cpus_per_machine // args.cpus_per_trial
+            row["sweep_min"] = round(makespan([args.trial_minutes] * args.trials, m * per_machine), 1)
+        rows.append(row)
+        sweep = f"{row['sweep_min']:.1f}" if "sweep_min" in row else "-"
+        print(f"| {m} | {row['cpus']} | {row['flights_min']:.1f} | {sweep} |")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.plan is not None:
+        return plan(args)
     try:
         cpu_counts = [int(c) for c in args.cpus.split(",") if c.strip()]
         if not cpu_counts or any(not 1 <= c <= 4096 for c in cpu_counts):

@@ -9,7 +9,8 @@ writes to ``--out``:
 - ``results.json``: pooled and per-flight metrics of every run, the budgets and the checks: the same
   seeds and settings give the same file, byte for byte, wherever the flights ran;
 - ``timing.json``: what measures time, so differs from run to run: the MPCs' solve times
-  (pooled and per flight) and the wall time of the flights;
+  (pooled and per flight), the wall time of the flights and (with ``--ray``) each
+  flight's seconds on its worker;
 - ``table_i_circle.png`` (paper Fig. 6) and ``table_ii_sweep.png`` (paper Fig. 10).
 
 Controllers fly the preset of ``--weights`` (:mod:`controllers.presets`): by default
@@ -248,6 +249,8 @@ def run(args: argparse.Namespace) -> int:
     flights = sum(len(r.evaluation.episodes) for r in results)
     timing["flights"] = {"count": flights, "wall_time_s": round(flying_s, 3),
                          "executor": "in this process" if args.ray is None else f"Ray ({args.ray})"}
+    if executor is not None:  # each flight's seconds on its worker, in the order of the tables
+        timing["flights"]["seconds_each"] = [round(s, 3) for s in executor.seconds]
     paths["timing"].write_text(json.dumps(timing, indent=2))
     print(paths["markdown"].read_text())
     print(f"{len(results)} runs ({flights} flights) in {flying_s:.0f} s; wrote " + ", ".join(str(p) for p in paths.values()))

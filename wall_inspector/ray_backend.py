@@ -91,33 +91,53 @@ def cluster_cpus() -> float:
 
 
 # ---------------------------------------------------------------------- compare: one flight per task
-def flight_executor(cpus_per_flight: float = CPUS_PER_FLIGHT) -> Callable:
-    """A :data:`controllers.paper_tables.FlightExecutor` that flies every flight as a Ray task.
-
-    The tasks are submitted at once and Ray runs as many as the cluster has CPUs for; the
-    records come back in the order of the flights, whatever order they finished in.
-    """
-    import ray
+def _timed_fly(flight: Any) -> tuple[Any, float]:
+    """Fly one flight; return its record and the seconds the flight took on its worker."""
+    import time
 
     from controllers.paper_tables import fly
 
-    remote_fly = ray.remote(num_cpus=cpus_per_flight, max_retries=FLIGHT_RETRIES)(fly)
+    t0 = time.perf_counter()
+    record = fly(flight)
+    return record, time.perf_counter() - t0
 
-    def executor(flights: Sequence[Any], on_flight: Callable[[], object]) -> list[Any]:
-        refs = [remote_fly.remote(flight) for flight in flights]
+
+class FlightExecutor:
+    """A :data:`controllers.paper_tables.FlightExecutor` that flies every flight as a Ray task.
+
+    The tasks are submitted at once and Ray runs as many as the cluster has CPUs for
+    (``cpus_per_flight`` each); the records come back in the order of the flights, whatever
+    order they finished in. ``seconds`` holds each flight's time on its worker (the same
+    order), for estimates of other cluster sizes (``wall-inspector bench-ray --plan``).
+    """
+
+    def __init__(self, cpus_per_flight: float = CPUS_PER_FLIGHT):
+        import ray
+
+        self.remote = ray.remote(num_cpus=cpus_per_flight, max_retries=FLIGHT_RETRIES)(_timed_fly)
+        self.seconds: list[float] = []
+
+    def __call__(self, flights: Sequence[Any], on_flight: Callable[[], object]) -> list[Any]:
+        import ray
+
+        refs = [self.remote.remote(flight) for flight in flights]
         where = {ref: i for i, ref in enumerate(refs)}
-        records: list[Any] = [None] * len(refs)
+        done_records: list[Any] = [None] * len(refs)
         pending = list(refs)
         try:
             while pending:
                 done, pending = ray.wait(pending, num_returns=1)
                 for ref in done:
-                    records[where[ref]] = ray.get(ref)
+                    done_records[where[ref]] = ray.get(ref)
                     on_flight()
         except KeyboardInterrupt:
             for ref in pending:
                 ray.cancel(ref, force=True)
             raise
-        return records
+        self.seconds += [float(seconds) for _, seconds in done_records]
+        return [record for record, _ in done_records]
 
-    return executor
+
+def flight_executor(cpus_per_flight: float = CPUS_PER_FLIGHT) -> FlightExecutor:
+    """A :class:`FlightExecutor` on the connected Ray cluster."""
+    return FlightExecutor(cpus_per_flight)
