@@ -38,9 +38,9 @@ def cluster():
 
 
 def test_nothing_imports_ray_without_the_flag():
-    code = ("import sys, wall_inspector.cli, wall_inspector.compare, wall_inspector.tune, wall_inspector.ray_backend, "
-            "controllers.paper_tables, controllers.tuning, agents.train; "
-            "import argparse; p = argparse.ArgumentParser(); wall_inspector.compare.add_arguments(p); "
+    code = ("import argparse, sys, controllers.paper_tables, controllers.tuning, agents.train; "
+            "from wall_inspector import compare, tune, train, bench_ray, ray_backend, tune_on_ray, train_on_ray; "
+            "[m.add_arguments(argparse.ArgumentParser()) for m in (compare, tune, train, bench_ray)]; "
             "print('ray' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"

@@ -150,10 +150,8 @@ def plan(args: argparse.Namespace) -> int:
     except (OSError, ValueError, KeyError, TypeError):
         raise SystemExit(f"--plan {args.plan}: not the timing.json of a compare --ray run (flights.seconds_each)") \
             from None
-    print(f"{len(seconds)} flights, {sum(seconds):.0f} s of flying in all (longest {max(seconds):.1f} s), "
-          f"measured by a compare --ray run ({timing['flights']['executor']})")
-    print("| machines | CPUs | flights (min) | training sweep (min) |")
-    print("|---:|---:|---:|---:|")
+    lines = [f"| machines | CPUs | all flights of `compare` (min) | {args.trials}-run training sweep (min) |",
+             "|---:|---:|---:|---:|"]
     rows = []
     for m in machines:
         flights_s = makespan(seconds, m * args.cpus_per_machine)
@@ -162,8 +160,22 @@ def plan(args: argparse.Namespace) -> int:
             per_machine = args.cpus_per_machine // args.cpus_per_trial
             row["sweep_min"] = round(makespan([args.trial_minutes] * args.trials, m * per_machine), 1)
         rows.append(row)
-        sweep = f"{row['sweep_min']:.1f}" if "sweep_min" in row else "-"
-        print(f"| {m} | {row['cpus']} | {row['flights_min']:.1f} | {sweep} |")
+        sweep = f"{row['sweep_min']:.0f}" if "sweep_min" in row else "-"
+        lines.append(f"| {m} | {row['cpus']} | {row['flights_min']:.1f} | {sweep} |")
+    note = (f"\nFrom {len(seconds)} flights measured by `compare --ray` ({sum(seconds) / 60:.1f} min of flying in all, "
+            f"longest flight {max(seconds):.1f} s): each column is the list-scheduling makespan of the measured "
+            f"per-flight times on machines x {args.cpus_per_machine} CPUs, one flight per CPU, in the order compare "
+            "submits them (`wall-inspector bench-ray --plan`). Ray's start and per-flight overhead are not included")
+    if args.trial_minutes is not None:
+        note += (f"; the sweep is {args.trials} training runs of {args.trial_minutes:g} min each (a measured run's wall "
+                 f"time), {args.cpus_per_trial} CPUs per run")
+    lines.append(note + ".")
+    text = "\n".join(lines) + "\n"
+    print(text)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "plan.md").write_text(text)
+    print(f"wrote {out / 'plan.md'}")
     return 0
 
 
@@ -209,5 +221,26 @@ def run(args: argparse.Namespace) -> int:
     print(f"load average after: {figures['load_after']}")
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench_ray.json").write_text(json.dumps(figures, indent=2))
-    print(f"wrote {out / 'bench_ray.json'}")
+    (out / "bench_ray.md").write_text(_markdown(figures))
+    print(f"wrote {out / 'bench_ray.json'} and {out / 'bench_ray.md'}")
     return 0
+
+
+def _markdown(figures: dict[str, Any]) -> str:
+    o = figures["overhead"]
+    lines = ["| figure | measured | target |", "|---|---:|---:|"]
+    s = figures.get("speedup")
+    if s and "speedup" in s:
+        first, last = s["runs"][0], s["runs"][-1]
+        lines.append(f"| Table II, {first['flights']} flights: wall time with {first['cpus']} CPU / {last['cpus']} CPUs "
+                     f"| {first['wall_time_s']:.0f} s / {last['wall_time_s']:.0f} s | |")
+        lines.append(f"| speed-up | {s['speedup']:.2f}x | >= {TARGETS['speedup_2_vs_1']}x |")
+        lines.append(f"| same results.json content with {first['cpus']} and {last['cpus']} CPUs | "
+                     f"{'yes' if s['identical_results'] else 'NO'} | yes |")
+    lines.append(f"| one flight ({o['steps']} steps): in this process / as a Ray task on a warm worker (median of "
+                 f"{o['repeats']}) | {o['local_median_s']:.3f} s / {o['ray_median_s']:.3f} s | |")
+    lines.append(f"| Ray's overhead per flight | {o['overhead_s']:.3f} s | <= {TARGETS['overhead_s']} s |")
+    lines.append(f"| first task on a new worker (process start and imports included) | {o['first_task_s']:.2f} s | |")
+    return ("\n".join(lines) + f"\n\nMeasured by `wall-inspector bench-ray` on {figures['machine']}, with load "
+            f"averages {figures['load_before']} before and {figures['load_after']} after (1, 5, 15 min): the machine "
+            "was shared with other work, which depresses the speed-up.\n")

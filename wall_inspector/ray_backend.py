@@ -10,6 +10,10 @@ Every machine of a cluster needs this package installed the same way (same Pytho
 versions): Ray ships the work (a flight, a trial) by reference to this package's
 functions, not the code itself.
 
+Ray runs its workers at nice 15 by default, which starves them on a machine busy with
+other work; the embedded Ray runs them at the command's own priority (nice 0). On a
+cluster that is ``ray start``'s business: ``RAY_worker_niceness=0 ray start ...``.
+
 Resource hints: a flight task asks for :data:`CPUS_PER_FLIGHT` CPU (a flight is one
 single-threaded process: env, controller, and PyTorch inference for PPO, which Ray
 limits to one thread per CPU asked for), a tuning trial for ``--cpus-per-trial`` (1 by
@@ -74,7 +78,10 @@ def session(address: str, num_cpus: int | None = None) -> Iterator[Any]:
         yield ray
         return
     if address == LOCAL:
-        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False, configure_logging=False)
+        # Ray starts its workers at nice 15 by default; an embedded Ray is this command's own work, so its
+        # workers run at the command's priority, as the flights of a local run do
+        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False, configure_logging=False,
+                 _system_config={"worker_niceness": 0})
     else:
         ray.init(address=address, log_to_driver=False, configure_logging=False)
     try:
