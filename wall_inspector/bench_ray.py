@@ -7,11 +7,15 @@ Two figures, measured in one run on an embedded Ray of this machine:
   agents; 10 seeds) flown as Ray tasks on an embedded Ray with 1 CPU, then (a new Ray)
   with 2 CPUs (``--cpus``); the wall time of the flights, Ray's start excluded, and the
   ratio. The two runs' ``results.json`` content is compared too (it must be identical).
+* **the machine's own speed-up** at the same time, without Ray: equal pieces of
+  pure-Python work in one process, then in two (a machine shared with other work may
+  not give a second core's worth; this says how much of the speed-up there was to get).
 * **overhead per flight**: one flight (SC-MPC on the sweep, seed 0) flown in this
   process and as a Ray task on a warm worker (Ray started, the worker's imports done by
   a first task), each ``--repeats`` times, interleaved; the overhead is the difference of
   the medians.
-  The first task on a fresh worker (process start and imports) is reported too.
+  The first task on a fresh worker (process start and imports) is reported too, and
+  Ray's cost per task alone: the same difference for a 20-step flight.
 
 Prints a table and writes ``OUT/bench_ray.json``. Figures depend on the machine's load:
 ``uptime``'s load average is printed with them.
@@ -56,6 +60,31 @@ def _load() -> str:
         return "unknown"
 
 
+def _spin(_: int) -> float:
+    """A fixed amount of pure-Python work; its seconds."""
+    t0 = time.perf_counter()
+    x = 0
+    for i in range(3_000_000):
+        x += i * i
+    return time.perf_counter() - t0
+
+
+def _machine_speedup(jobs: int = 8) -> dict[str, Any]:
+    """What this machine gives right now: ``jobs`` equal pieces of work in 1 process, then in 2 (no Ray)."""
+    import multiprocessing
+
+    t0 = time.perf_counter()
+    for i in range(jobs):
+        _spin(i)
+    one = time.perf_counter() - t0
+    with multiprocessing.get_context("spawn").Pool(2) as pool:
+        pool.map(_spin, range(2))  # start-up out of the timing
+        t0 = time.perf_counter()
+        pool.map(_spin, range(jobs), chunksize=1)
+        two = time.perf_counter() - t0
+    return {"one_process_s": round(one, 3), "two_processes_s": round(two, 3), "speedup": round(one / two, 3)}
+
+
 def _table_ii(seeds: int, duration: float | None) -> tuple[list[Any], dict[str, Any]]:
     import dataclasses
 
@@ -95,6 +124,8 @@ def _speedup(cpu_counts: list[int], seeds: int, duration: float | None) -> dict[
 
 
 def _overhead(repeats: int, duration: float | None) -> dict[str, Any]:
+    import dataclasses
+
     import ray
 
     from controllers import paper_tables as pt
@@ -116,11 +147,23 @@ def _overhead(repeats: int, duration: float | None) -> dict[str, Any]:
             t0 = time.perf_counter()
             ray.get(remote_fly.remote(flight))
             remote.append(time.perf_counter() - t0)
+        short_scenario = dataclasses.replace(scenarios[0], env_kwargs={**scenarios[0].env_kwargs, "duration": 0.2})
+        short = pt.Flight(short_scenario, "SC-MPC", policies["SC-MPC"], 0)
+        short_local, short_remote = [], []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            pt.fly(short)
+            short_local.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            ray.get(remote_fly.remote(short))
+            short_remote.append(time.perf_counter() - t0)
     local_s, remote_s = statistics.median(local), statistics.median(remote)
+    fixed_s = statistics.median(short_remote) - statistics.median(short_local)
     return {"flight": "SC-MPC, WallSweep-v0, seed 0", "steps": len(pt.fly(flight).time),
             "local_median_s": round(local_s, 4), "ray_median_s": round(remote_s, 4),
             "overhead_s": round(remote_s - local_s, 4), "first_task_s": round(cold, 3),
-            "first_task_overhead_s": round(cold - local_s, 3), "repeats": repeats}
+            "first_task_overhead_s": round(cold - local_s, 3), "repeats": repeats,
+            "fixed_cost_s": round(fixed_s, 4)}  # the same for a 20-step flight: Ray's cost per task
 
 
 def makespan(seconds: list[float], slots: int) -> float:
@@ -209,7 +252,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"one flight ({o['steps']} steps): {o['local_median_s']:.3f} s in this process, {o['ray_median_s']:.3f} s as a "
           f"Ray task on a warm worker: overhead {o['overhead_s']:.3f} s (target <= {TARGETS['overhead_s']} s); "
           f"first task on a new worker {o['first_task_s']:.2f} s", flush=True)
+    print(f"a 20-step flight: Ray's cost per task {o['fixed_cost_s']:.3f} s", flush=True)
     if not args.skip_speedup:
+        figures["machine_speedup"] = _machine_speedup()
+        m = figures["machine_speedup"]
+        print(f"the machine itself, no Ray: the same pure-Python work in 1 process {m['one_process_s']:.2f} s, in 2 "
+              f"{m['two_processes_s']:.2f} s: {m['speedup']:.2f}x", flush=True)
         figures["speedup"] = _speedup(cpu_counts, args.seeds, args.duration)
         s = figures["speedup"]
         if "speedup" in s:
@@ -240,7 +288,12 @@ def _markdown(figures: dict[str, Any]) -> str:
     lines.append(f"| one flight ({o['steps']} steps): in this process / as a Ray task on a warm worker (median of "
                  f"{o['repeats']}) | {o['local_median_s']:.3f} s / {o['ray_median_s']:.3f} s | |")
     lines.append(f"| Ray's overhead per flight | {o['overhead_s']:.3f} s | <= {TARGETS['overhead_s']} s |")
+    lines.append(f"| Ray's cost per task (the same for a 20-step flight) | {o['fixed_cost_s']:.3f} s | |")
     lines.append(f"| first task on a new worker (process start and imports included) | {o['first_task_s']:.2f} s | |")
+    m = figures.get("machine_speedup")
+    if m:
+        lines.append(f"| control, no Ray: the same pure-Python work in 1 process / 2 processes | {m['one_process_s']:.2f} s"
+                     f" / {m['two_processes_s']:.2f} s ({m['speedup']:.2f}x) | |")
     return ("\n".join(lines) + f"\n\nMeasured by `wall-inspector bench-ray` on {figures['machine']}, with load "
             f"averages {figures['load_before']} before and {figures['load_after']} after (1, 5, 15 min): the machine "
             "was shared with other work, which depresses the speed-up.\n")
