@@ -5,8 +5,9 @@ Two figures, measured in one run on an embedded Ray of this machine:
 * **speed-up**: the default Table II of ``compare`` (every method of ``compare``'s
   defaults: the tuned presets, the authors' settings, both SC-MPC forms, the shipped PPO
   agents; 10 seeds) flown as Ray tasks on an embedded Ray with 1 CPU, then (a new Ray)
-  with 2 CPUs (``--cpus``); the wall time of the flights, Ray's start excluded, and the
-  ratio. The two runs' ``results.json`` content is compared too (it must be identical).
+  with 2 CPUs (``--cpus``), then (``--rounds 2``, the default) with 2 and 1 again, so
+  that a drift of the machine's load meets both alike; the wall time of the flights,
+  Ray's start excluded, summed per CPU count, and the ratio. The two runs' ``results.json`` content is compared too (it must be identical).
 * **the machine's own speed-up** at the same time, without Ray: equal pieces of
   pure-Python work in one process, then in two (a machine shared with other work may
   not give a second core's worth; this says how much of the speed-up there was to get).
@@ -40,14 +41,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=None, help="shorten every flight (s; default: the task's)")
     parser.add_argument("--repeats", type=int, default=9, help="repetitions of the single flight (default 9)")
     parser.add_argument("--skip-speedup", action="store_true", help="measure the overhead only")
+    parser.add_argument("--rounds", type=int, choices=(1, 2), default=2,
+                        help="2 (default): fly Table II with 1, 2, 2, 1 CPUs and compare the sums; 1: with 1, then 2")
     parser.add_argument("--out", default="out/bench-ray", help="folder for bench_ray.json")
     parser.add_argument("--plan", metavar="TIMING.json", default=None,
                         help="instead of measuring: estimate the wall time of the flights of a compare --ray run "
                              "(its timing.json) and of a training sweep on --machines machines")
     parser.add_argument("--machines", default="1,4,16", help="with --plan: machine counts (default 1,4,16)")
     parser.add_argument("--cpus-per-machine", type=int, default=2, help="with --plan: CPUs of a machine (default 2)")
-    parser.add_argument("--trial-minutes", type=float, default=None,
-                        help="with --plan: measured wall time of one training run (a model card's), for the sweep")
+    parser.add_argument("--trial-card", default=None, metavar="MODEL_CARD.json",
+                        help="with --plan: the model card of a training run, whose measured wall time is the sweep's "
+                             "per-run time (e.g. agents/pretrained/wall_sweep/model_card.json)")
     parser.add_argument("--trials", type=int, default=10, help="with --plan: training runs of the sweep (default 10)")
     parser.add_argument("--cpus-per-trial", type=int, default=2,
                         help="with --plan: CPUs a training run reserves (default 2, train's n_workers)")
@@ -67,6 +71,15 @@ def _spin(_: int) -> float:
     for i in range(3_000_000):
         x += i * i
     return time.perf_counter() - t0
+
+
+def _warm_worker() -> None:
+    """Import what flights need (a Ray task on each worker before timing), and hold the worker a moment so
+    that the other warm-up tasks go to the other workers."""
+    import agents.policy  # noqa: F401  (PPO: torch, Stable-Baselines3)
+    import controllers.paper_tables  # noqa: F401
+
+    time.sleep(1.0)
 
 
 def _machine_speedup(jobs: int = 8) -> dict[str, Any]:
@@ -100,15 +113,19 @@ def _table_ii(seeds: int, duration: float | None) -> tuple[list[Any], dict[str, 
     return scenarios, policies
 
 
-def _speedup(cpu_counts: list[int], seeds: int, duration: float | None) -> dict[str, Any]:
+def _speedup(cpu_counts: list[int], seeds: int, duration: float | None, rounds: int = 2) -> dict[str, Any]:
     from controllers import paper_tables as pt
     from wall_inspector import ray_backend
 
     scenarios, policies = _table_ii(seeds, duration)
     runs: list[dict[str, Any]] = []
     contents = []
-    for cpus in cpu_counts:
-        with ray_backend.session(ray_backend.LOCAL, cpus):
+    order = list(cpu_counts) + list(reversed(cpu_counts)) if rounds == 2 else list(cpu_counts)
+    for cpus in order:  # with two rounds A B B A: a drift of the machine's load meets both alike
+        with ray_backend.session(ray_backend.LOCAL, cpus) as ray:
+            # Ray's start is not the flights': every worker imports what a flight needs before the clock starts
+            warm = ray.remote(num_cpus=ray_backend.CPUS_PER_FLIGHT)(_warm_worker)
+            ray.get([warm.remote() for _ in range(cpus)])
             t0 = time.perf_counter()
             results = pt.run_scenarios(scenarios, policies, progress=False, executor=ray_backend.flight_executor())
             seconds = time.perf_counter() - t0
@@ -118,8 +135,10 @@ def _speedup(cpu_counts: list[int], seeds: int, duration: float | None) -> dict[
         contents.append(json.dumps(pt.results_json(results), sort_keys=True, default=float))
         print(f"{cpus} CPU(s): {flights} flights in {seconds:.1f} s (load {_load()})", flush=True)
     out: dict[str, Any] = {"runs": runs, "identical_results": len(set(contents)) == 1}
-    if len(runs) >= 2:
-        out["speedup"] = round(runs[0]["wall_time_s"] / runs[-1]["wall_time_s"], 3)
+    totals = {c: sum(r["wall_time_s"] for r in runs if r["cpus"] == c) for c in cpu_counts}
+    out["wall_time_s"] = {str(c): round(t, 2) for c, t in totals.items()}
+    if len(cpu_counts) >= 2:
+        out["speedup"] = round(totals[cpu_counts[0]] / totals[cpu_counts[-1]], 3)
     return out
 
 
@@ -193,15 +212,23 @@ def plan(args: argparse.Namespace) -> int:
     except (OSError, ValueError, KeyError, TypeError):
         raise SystemExit(f"--plan {args.plan}: not the timing.json of a compare --ray run (flights.seconds_each)") \
             from None
+    trial_minutes = None
+    if args.trial_card is not None:
+        try:
+            training = json.loads(Path(args.trial_card).read_text())["training"]
+            trial_minutes = float(training["total_wall_time_s"]) / 60
+            trial_steps = int(training["total_timesteps"])
+        except (OSError, ValueError, KeyError, TypeError):
+            raise SystemExit(f"--trial-card {args.trial_card}: not a model card (training.total_wall_time_s)") from None
     lines = [f"| machines | CPUs | all flights of `compare` (min) | {args.trials}-run training sweep (min) |",
              "|---:|---:|---:|---:|"]
     rows = []
     for m in machines:
         flights_s = makespan(seconds, m * args.cpus_per_machine)
         row = {"machines": m, "cpus": m * args.cpus_per_machine, "flights_min": round(flights_s / 60, 2)}
-        if args.trial_minutes is not None:
+        if trial_minutes is not None:
             per_machine = args.cpus_per_machine // args.cpus_per_trial
-            row["sweep_min"] = round(makespan([args.trial_minutes] * args.trials, m * per_machine), 1)
+            row["sweep_min"] = round(makespan([trial_minutes] * args.trials, m * per_machine), 1)
         rows.append(row)
         sweep = f"{row['sweep_min']:.0f}" if "sweep_min" in row else "-"
         lines.append(f"| {m} | {row['cpus']} | {row['flights_min']:.1f} | {sweep} |")
@@ -209,9 +236,10 @@ def plan(args: argparse.Namespace) -> int:
             f"longest flight {max(seconds):.1f} s): each column is the list-scheduling makespan of the measured "
             f"per-flight times on machines x {args.cpus_per_machine} CPUs, one flight per CPU, in the order compare "
             "submits them (`wall-inspector bench-ray --plan`). Ray's start and per-flight overhead are not included")
-    if args.trial_minutes is not None:
-        note += (f"; the sweep is {args.trials} training runs of {args.trial_minutes:g} min each (a measured run's wall "
-                 f"time), {args.cpus_per_trial} CPUs per run")
+    if trial_minutes is not None:
+        note += (f"; the sweep is {args.trials} training runs of {trial_minutes:.1f} min each ({trial_steps:,} env steps: "
+                 f"the measured wall time in `{args.trial_card}`), {args.cpus_per_trial} CPUs per run, so "
+                 f"{args.cpus_per_machine // args.cpus_per_trial} run(s) at a time per machine")
     lines.append(note + ".")
     text = "\n".join(lines) + "\n"
     print(text)
@@ -258,12 +286,13 @@ def run(args: argparse.Namespace) -> int:
         m = figures["machine_speedup"]
         print(f"the machine itself, no Ray: the same pure-Python work in 1 process {m['one_process_s']:.2f} s, in 2 "
               f"{m['two_processes_s']:.2f} s: {m['speedup']:.2f}x", flush=True)
-        figures["speedup"] = _speedup(cpu_counts, args.seeds, args.duration)
+        figures["speedup"] = _speedup(cpu_counts, args.seeds, args.duration, args.rounds)
         s = figures["speedup"]
         if "speedup" in s:
-            print(f"Table II ({s['runs'][0]['flights']} flights): {s['runs'][0]['wall_time_s']:.1f} s with "
-                  f"{s['runs'][0]['cpus']} CPU, {s['runs'][-1]['wall_time_s']:.1f} s with {s['runs'][-1]['cpus']}: "
-                  f"speed-up {s['speedup']:.2f}x (target >= {TARGETS['speedup_2_vs_1']}x); identical results: "
+            first, last = cpu_counts[0], cpu_counts[-1]
+            print(f"Table II ({s['runs'][0]['flights']} flights, each CPU count {args.rounds} time(s)): "
+                  f"{s['wall_time_s'][str(first)]:.1f} s with {first} CPU, {s['wall_time_s'][str(last)]:.1f} s with "
+                  f"{last}: speed-up {s['speedup']:.2f}x (target >= {TARGETS['speedup_2_vs_1']}x); identical results: "
                   f"{s['identical_results']}")
     figures["load_after"] = _load()
     print(f"load average after: {figures['load_after']}")
@@ -279,11 +308,14 @@ def _markdown(figures: dict[str, Any]) -> str:
     lines = ["| figure | measured | target |", "|---|---:|---:|"]
     s = figures.get("speedup")
     if s and "speedup" in s:
-        first, last = s["runs"][0], s["runs"][-1]
-        lines.append(f"| Table II, {first['flights']} flights: wall time with {first['cpus']} CPU / {last['cpus']} CPUs "
-                     f"| {first['wall_time_s']:.0f} s / {last['wall_time_s']:.0f} s | |")
+        counts = list(s["wall_time_s"])
+        first = s["runs"][0]
+        times = " + ".join(f"{r['wall_time_s']:.0f} s ({r['cpus']})" for r in s["runs"])
+        lines.append(f"| Table II, {first['flights']} flights per run, runs in this order (CPUs) | {times} | |")
+        lines.append(f"| wall time with {counts[0]} CPU / {counts[-1]} CPUs (sums) | {s['wall_time_s'][counts[0]]:.0f} s / "
+                     f"{s['wall_time_s'][counts[-1]]:.0f} s | |")
         lines.append(f"| speed-up | {s['speedup']:.2f}x | >= {TARGETS['speedup_2_vs_1']}x |")
-        lines.append(f"| same results.json content with {first['cpus']} and {last['cpus']} CPUs | "
+        lines.append(f"| same results.json content with {counts[0]} and {counts[-1]} CPUs | "
                      f"{'yes' if s['identical_results'] else 'NO'} | yes |")
     lines.append(f"| one flight ({o['steps']} steps): in this process / as a Ray task on a warm worker (median of "
                  f"{o['repeats']}) | {o['local_median_s']:.3f} s / {o['ray_median_s']:.3f} s | |")
