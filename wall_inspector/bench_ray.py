@@ -127,13 +127,18 @@ def _speedup(cpu_counts: list[int], seeds: int, duration: float | None, rounds: 
             warm = ray.remote(num_cpus=ray_backend.CPUS_PER_FLIGHT)(_warm_worker)
             ray.get([warm.remote() for _ in range(cpus)])
             t0 = time.perf_counter()
-            results = pt.run_scenarios(scenarios, policies, progress=False, executor=ray_backend.flight_executor())
+            executor = ray_backend.flight_executor()
+            results = pt.run_scenarios(scenarios, policies, progress=False, executor=executor)
             seconds = time.perf_counter() - t0
         flights = sum(len(r.evaluation.episodes) for r in results)
         runs.append({"cpus": cpus, "flights": flights, "wall_time_s": round(seconds, 2),
-                     "s_per_flight": round(seconds / flights, 3), "load_after": _load()})
+                     "s_per_flight": round(seconds / flights, 3), "load_after": _load(),
+                     # the flights' own seconds on their workers, summed: / wall time = flights flown at once
+                     "flight_seconds_sum": round(sum(executor.seconds), 2)})
         contents.append(json.dumps(pt.results_json(results), sort_keys=True, default=float))
-        print(f"{cpus} CPU(s): {flights} flights in {seconds:.1f} s (load {_load()})", flush=True)
+        print(f"{cpus} CPU(s): {flights} flights in {seconds:.1f} s, {sum(executor.seconds) / seconds:.2f} flying at "
+              f"once on average, {sum(executor.seconds) / flights:.2f} s per flight on its worker (load {_load()})",
+              flush=True)
     out: dict[str, Any] = {"runs": runs, "identical_results": len(set(contents)) == 1}
     totals = {c: sum(r["wall_time_s"] for r in runs if r["cpus"] == c) for c in cpu_counts}
     out["wall_time_s"] = {str(c): round(t, 2) for c, t in totals.items()}
@@ -311,10 +316,17 @@ def _markdown(figures: dict[str, Any]) -> str:
         counts = list(s["wall_time_s"])
         first = s["runs"][0]
         times = " + ".join(f"{r['wall_time_s']:.0f} s ({r['cpus']})" for r in s["runs"])
+        at_once = ", ".join(f"{r['flight_seconds_sum'] / r['wall_time_s']:.2f} ({r['cpus']})" for r in s["runs"]
+                            if "flight_seconds_sum" in r)
+        per_flight = ", ".join(f"{r['flight_seconds_sum'] / r['flights']:.2f} s ({r['cpus']})" for r in s["runs"]
+                               if "flight_seconds_sum" in r)
         lines.append(f"| Table II, {first['flights']} flights per run, runs in this order (CPUs) | {times} | |")
         lines.append(f"| wall time with {counts[0]} CPU / {counts[-1]} CPUs (sums) | {s['wall_time_s'][counts[0]]:.0f} s / "
                      f"{s['wall_time_s'][counts[-1]]:.0f} s | |")
         lines.append(f"| speed-up | {s['speedup']:.2f}x | >= {TARGETS['speedup_2_vs_1']}x |")
+        if at_once:
+            lines.append(f"| flights flying at once on average (CPUs), and a flight's seconds on its worker | {at_once}; "
+                         f"{per_flight} | |")
         lines.append(f"| same results.json content with {counts[0]} and {counts[-1]} CPUs | "
                      f"{'yes' if s['identical_results'] else 'NO'} | yes |")
     lines.append(f"| one flight ({o['steps']} steps): in this process / as a Ray task on a warm worker (median of "
