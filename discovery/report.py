@@ -122,10 +122,15 @@ def format_summary(report: dict[str, Any]) -> str:
     else:
         lines.append("found nothing: the logs agree with the nominal model within noise")
     b, a = report["gap_before"], report["gap_after"]
-    lines.append(f"held-out force residual RMS: {b['force_rms_N']:.4f} N -> {a['force_rms_N']:.4f} N "
+    lines.append(f"held-out force residual RMS: {_number(b['force_rms_N'])} N -> {_number(a['force_rms_N'])} N "
                  f"({_reduction(b['force_rms_N'], a['force_rms_N'])} smaller)")
-    lines.append(f"held-out open-loop prediction RMS: {b['prediction_rms_m']:.4f} m -> {a['prediction_rms_m']:.4f} m "
-                 f"({_reduction(b['prediction_rms_m'], a['prediction_rms_m'])} smaller)")
+    if b.get("prediction_rms_m") is None:
+        lines.append("held-out open-loop prediction RMS: n/a (no prediction window fits inside one "
+                     "cross-validation block; a longer log or a shorter --horizon gives one)")
+    else:
+        lines.append(f"held-out open-loop prediction RMS: {_number(b['prediction_rms_m'])} m -> "
+                     f"{_number(a['prediction_rms_m'])} m "
+                     f"({_reduction(b['prediction_rms_m'], a['prediction_rms_m'])} smaller)")
     if report.get("unexplained"):
         w = report["unexplained"]["where"]
         lines.append(f"UNEXPLAINED residual ({report['unexplained']['force_rms_N']:.4f} N RMS) depends on "
@@ -138,7 +143,11 @@ def format_summary(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _number(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.4f}"
+
+
 def _fmt(value: Any) -> str:
     if isinstance(value, list):
-        return "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
-    return f"{value:.4g}"
+        return "[" + ", ".join(_fmt(v) for v in value) + "]"
+    return "n/a" if value is None else f"{value:.4g}"

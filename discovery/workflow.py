@@ -32,6 +32,7 @@ effects (its cross-validated bin means against some regressor predict at least
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -56,6 +57,22 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(x.reshape(len(x), -1) ** 2, axis=1))))
 
 
+def check_positive(name: str, value: float, unit: str, *, low: float, high: float) -> float:
+    """``value`` as a float in ``[low, high]``, or a ValueError naming the parameter and the range."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number of {unit} in [{low:g}, {high:g}], got {value!r}") from None
+    if not (math.isfinite(number) and low <= number <= high):
+        raise ValueError(f"{name} must be in [{low:g}, {high:g}] {unit}, got {value!r}")
+    return number
+
+
+def minimum_duration(window_s: float, horizon_s: float) -> float:
+    """Shortest log (s) discovery can work with: four smoothing windows, and two prediction horizons."""
+    return max(4.0 * window_s, 2.0 * horizon_s)
+
+
 class Discovery:
     """Find what the nominal model misses in flight logs, name it from the effects library and fit it.
 
@@ -78,6 +95,14 @@ class Discovery:
                  horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S, max_effects: int = 3,
                  unexplained_threshold: float = 0.15, options: dict[str, dict[str, Any]] | None = None,
                  progress=None):
+        check_positive("window_s", window_s, "s", low=0.02, high=10.0)
+        check_positive("horizon_s", horizon_s, "s", low=0.02, high=10.0)
+        check_positive("block_s", block_s, "s", low=0.1, high=1e4)
+        check_positive("stride_s", stride_s, "s", low=0.001, high=10.0)
+        if isinstance(n_folds, bool) or not isinstance(n_folds, (int, np.integer)) or not 2 <= n_folds <= 20:
+            raise ValueError(f"n_folds must be an integer in [2, 20], got {n_folds!r}")
+        if isinstance(max_effects, bool) or not isinstance(max_effects, (int, np.integer)) or max_effects < 0:
+            raise ValueError(f"max_effects must be a non-negative integer, got {max_effects!r}")
         names = list(EFFECTS) if candidates is None else list(candidates)
         unknown = sorted(set(names) - set(EFFECTS)) + ([effect] if effect is not None and effect not in EFFECTS else [])
         if unknown:
@@ -106,6 +131,14 @@ class Discovery:
         """Run the five steps on ``logs``; results land in the attributes ending in ``_``."""
         started = time.perf_counter()
         logs = [logs] if isinstance(logs, FlightLog) else list(logs)
+        shortest = minimum_duration(self.window_s, self.horizon_s)
+        for log in logs:
+            if log.duration < shortest:
+                raise ValueError(
+                    f"{log.source}: the log lasts {log.duration:.3g} s ({log.n_samples} samples); discovery needs "
+                    f"at least {shortest:.3g} s (4 smoothing windows of window_s = {self.window_s:g} s and 2 "
+                    f"prediction horizons of horizon_s = {self.horizon_s:g} s): record a longer flight or lower "
+                    "window_s / horizon_s (--window, --horizon)")
         self._say("preparing residuals")
         data = prepare(logs, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
         self.data_ = data
