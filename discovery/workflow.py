@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from discovery.coverage import REST_THRUST_SHARE, flight_limits, resting_on_ground, scene_problems
 from discovery.fitting import out_of_fold_residuals
 from discovery.flight_log import FlightLog
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
@@ -131,6 +132,8 @@ class Discovery:
         """Run the five steps on ``logs``; results land in the attributes ending in ``_``."""
         started = time.perf_counter()
         logs = [logs] if isinstance(logs, FlightLog) else list(logs)
+        if not logs:
+            raise ValueError("discovery needs at least one flight log")
         shortest = minimum_duration(self.window_s, self.horizon_s)
         for log in logs:
             if log.duration < shortest:
@@ -139,14 +142,38 @@ class Discovery:
                     f"at least {shortest:.3g} s (4 smoothing windows of window_s = {self.window_s:g} s and 2 "
                     f"prediction horizons of horizon_s = {self.horizon_s:g} s): record a longer flight or lower "
                     "window_s / horizon_s (--window, --horizon)")
-        self._say("preparing residuals")
-        data = prepare(logs, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
-        self.data_ = data
         self.logs_ = logs
+        self.notes_: list[str] = []
+        airborne = []
+        for log in logs:
+            resting = resting_on_ground(log)
+            if resting.any():
+                dt = float(np.median(np.diff(log.t)))
+                self.notes_.append(
+                    f"{log.source}: {resting.sum() * dt:.1f} s of {log.duration:.1f} s held up by something "
+                    f"else: the thrust carries less than {100 * REST_THRUST_SHARE:.0f} % of the weight and the vehicle "
+                    "does not fall (on the ground or held): "
+                    "left out, that force is not aerodynamic")
+            if (~resting).sum() >= 2 and not resting.all():
+                kept = log.select(~resting)
+                if kept.duration >= shortest:
+                    airborne.append(kept)
+        self._say("preparing residuals")
+        try:
+            data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
+        except ValueError as exc:
+            if airborne:
+                raise
+            return self._nothing_to_fit(f"no airborne stretch of at least {shortest:.3g} s: nothing to fit",
+                                        started)
+        self.usable_ = True
+        self.data_ = data
         vehicle = data.vehicle.to_vehicle_params()
         nominal = FlightModel(vehicle, [])
         r_nom = data.residuals(nominal.aero_model())
         self.regressors_ = regressors(data)
+        self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]))
+        self.notes_ += scene_problems(self.regressors_, data.times)
 
         # 1-2: residual and where it is
         self.residual_before_ = data.concat(r_nom)
@@ -197,6 +224,26 @@ class Discovery:
         if left["regressor"] is not None and left["explained_fraction"] >= self.unexplained_threshold \
                 and left.get("range") is not None:
             self.unexplained_ = {"force_rms_N": _rms(self.residual_after_), "where": _public_where(left)}
+        self.runtime_s_ = time.perf_counter() - started
+        return self
+
+    def _nothing_to_fit(self, reason: str, started: float) -> Discovery:
+        """Results of a run whose logs hold nothing to fit: no effects, the nominal model, and why."""
+        self.usable_ = False
+        self.notes_.append(reason)
+        vehicle = self.logs_[0].vehicle.to_vehicle_params()
+        self.effects_, self.param_std_, self.explained_fraction_ = [], [], {}
+        self.model_ = FlightModel(vehicle, [])
+        self.selection_ = None
+        self.limits_ = [{"effects": sorted(EFFECTS), "reason": reason,
+                         "manoeuvre": "fly: take off and hover, move along each body axis at 1 m/s or more, and "
+                                      "pass close to the walls, ground and ceiling of the scene"}]
+        self.where_, self.where_before_, self.where_after_, self.effect_forces_ = {}, {}, {}, {}
+        self.unexplained_ = None
+        nan = float("nan")
+        self.gap_before_ = {"force_rms_N": nan, "prediction_rms_m": nan}
+        self.gap_after_ = dict(self.gap_before_)
+        self.prediction_errors_before_ = np.zeros(0)
         self.runtime_s_ = time.perf_counter() - started
         return self
 
