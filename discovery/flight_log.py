@@ -49,6 +49,7 @@ import csv
 import io
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -75,6 +76,7 @@ __all__ = [
     "write_log",
     "sidecar_path",
     "parse_sidecar",
+    "csv_output_problem",
     "read_vehicle_and_scene",
 ]
 
@@ -548,6 +550,28 @@ def parse_sidecar(path: Path, text: str, data: Any) -> tuple[NominalVehicle, Sce
 
 
 # ====================================================================== writing
+def csv_output_problem(out: str | Path, overwrite: bool = False, extra: tuple[Path, ...] = ()) -> str | None:
+    """Why a log cannot be written to ``out`` (one line naming the option), or None; checked before any work.
+
+    ``extra``: other files the command writes beside the log.
+    """
+    path = Path(out)
+    if path.suffix.lower() != ".csv":
+        return f"--out must be a .csv path (the JSON sidecar goes beside it), got {path}"
+    if path.is_dir():
+        return f"--out {path} is a folder; give a .csv file path"
+    if not overwrite:
+        for target in (path, sidecar_path(path), *extra):
+            if target.exists():
+                return f"{target} exists; pass --overwrite to replace it or choose another --out"
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        return f"--out {path}: cannot create or write into {parent}"
+    return None
+
+
 def write_log(log: FlightLog, path: str | Path, *, overwrite: bool = False, precision: int = 9) -> tuple[Path, Path]:
     """Write ``log`` as ``path`` (CSV) and its JSON sidecar; returns both paths.
 

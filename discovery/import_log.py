@@ -19,9 +19,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from discovery.flight_log import THRUST_MAP_KINDS, LogFormatError, sidecar_path, write_log
+from discovery.flight_log import THRUST_MAP_KINDS, LogFormatError, csv_output_problem, write_log
 
-__all__ = ["add_arguments", "run", "check_csv_output"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,36 +36,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true", help="replace existing output files")
 
 
-def check_csv_output(command: str, out: str | Path, overwrite: bool, extra: tuple[Path, ...] = ()) -> str | None:
-    """Why ``out`` cannot take a flight log (a one-line message), or None when it can."""
-    path = Path(out)
-    if path.suffix.lower() != ".csv":
-        return f"{command}: --out must be a .csv path (the JSON sidecar goes beside it), got {path}"
-    if path.is_dir():
-        return f"{command}: --out {path} is a folder; give a .csv file path"
-    if not overwrite:
-        for target in (path, sidecar_path(path), *extra):
-            if target.exists():
-                return f"{command}: {target} exists; pass --overwrite to replace it or choose another --out"
-    parent = path.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        return f"{command}: cannot create {path}: {parent} is not a folder"
-    import os
-
-    if not os.access(parent, os.W_OK):
-        return f"{command}: cannot write into {parent}"
-    return None
-
-
 def run(args: argparse.Namespace) -> int:
     from discovery.importers import import_log
 
     out = Path(args.out) if args.out else Path(Path(args.log.rstrip("/")).stem + ".csv")
-    problem = check_csv_output("import-log", out, args.overwrite)
+    problem = csv_output_problem(out, args.overwrite)
     if problem:
-        print(problem, file=sys.stderr)
+        print(f"import-log: {problem}", file=sys.stderr)
         return 2
     try:
         log, info = import_log(args.log, args.vehicle, args.scene, topics=args.topics, rate_hz=args.rate,
