@@ -381,8 +381,9 @@ def _assemble(path: Path, c: dict[str, np.ndarray], vehicle: NominalVehicle, sce
         raise LogFormatError(f"{path}: column 't': median sample rate {rate:.1f} Hz is outside the supported "
                              f"{MIN_RATE_HZ:g} Hz to {MAX_RATE_HZ:g} Hz")
     q = np.column_stack([c[k] for k in ("qw", "qx", "qy", "qz")])
-    norms = np.linalg.norm(q, axis=1)
-    bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_TOLERANCE)
+    with np.errstate(over="ignore"):  # a huge component gives norm inf, rejected below
+        norms = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(~(np.abs(norms - 1.0) <= QUATERNION_TOLERANCE))
     if bad.size:
         i = int(bad[0])
         raise LogFormatError(f"{path}: line {lines[i]} (sample {i + 1}), columns 'qw, qx, qy, qz': quaternion norm "

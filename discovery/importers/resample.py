@@ -19,20 +19,30 @@ from scipy.spatial.transform import Rotation, Slerp
 __all__ = ["Signal", "common_clock", "valid_mask", "interpolate", "interpolate_attitude", "hold"]
 
 GAP_FACTOR = 3.0
+MAX_MAGNITUDE = 1e15
 
 
 @dataclass
 class Signal:
-    """One topic's samples: strictly increasing times ``(n,)`` s and values ``(n, k)``."""
+    """One topic's samples: strictly increasing times ``(n,)`` s and values ``(n, k)``.
+
+    Rows with a missing value (NaN, inf, or a magnitude of :data:`MAX_MAGNITUDE` or
+    more) are dropped, then the rows are sorted by time and repeated times dropped.
+    """
 
     name: str
     t: np.ndarray
     values: np.ndarray
 
     def __post_init__(self) -> None:
-        t = np.asarray(self.t, dtype=float)
-        values = np.asarray(self.values, dtype=float).reshape(len(t), -1)
-        keep = np.all(np.isfinite(values), axis=1) & np.isfinite(t)
+        t = np.asarray(self.t, dtype=float).reshape(-1)
+        values = np.asarray(self.values, dtype=float)
+        if values.ndim == 1:
+            values = values[:, None]
+        if values.ndim != 2 or len(values) != len(t):
+            raise ValueError(f"signal {self.name!r}: {len(t)} times but values of shape {values.shape}")
+        # NaN, inf and absurd magnitudes (no logged quantity reaches 1e15) are missing samples
+        keep = np.all(np.abs(values) < MAX_MAGNITUDE, axis=1) & (np.abs(t) < MAX_MAGNITUDE)
         t, values = t[keep], values[keep]
         order = np.argsort(t, kind="stable")
         t, values = t[order], values[order]
@@ -81,11 +91,24 @@ def interpolate(signal: Signal, t: np.ndarray) -> np.ndarray:
 
 
 def interpolate_attitude(signal: Signal, t: np.ndarray) -> np.ndarray:
-    """Spherical linear interpolation of quaternions ``[w, x, y, z]`` at ``t`` (clamped to the span)."""
+    """Spherical linear interpolation of quaternions ``[w, x, y, z]`` at ``t`` (clamped to the span).
+
+    Samples whose quaternion has no direction (zero) are skipped; fewer than two usable
+    samples is a ValueError naming the signal.
+    """
     q = signal.values
-    rotations = Rotation.from_quat(q[:, [1, 2, 3, 0]])
-    slerp = Slerp(signal.t, rotations)
-    xyzw = slerp(np.clip(t, signal.t[0], signal.t[-1])).as_quat()
+    if q.shape[1] != 4:
+        raise ValueError(f"signal {signal.name!r}: a quaternion has 4 values, got {q.shape[1]}")
+    scaled = q / np.maximum(np.max(np.abs(q), axis=1, keepdims=True), 1e-300)  # no overflow in the norm
+    norms = np.linalg.norm(scaled, axis=1)
+    usable = norms > 1e-9
+    if usable.sum() < 2:
+        raise ValueError(f"signal {signal.name!r}: fewer than 2 usable (non-zero) quaternions")
+    unit = scaled[usable] / norms[usable, None]
+    rotations = Rotation.from_quat(unit[:, [1, 2, 3, 0]])
+    slerp = Slerp(signal.t[usable], rotations)
+    t = np.clip(t, signal.t[usable][0], signal.t[usable][-1])
+    xyzw = slerp(t).as_quat()
     wxyz = xyzw[:, [3, 0, 1, 2]]
     return wxyz * np.where(wxyz[:, :1] < 0, -1.0, 1.0)
 
