@@ -83,8 +83,8 @@ def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
         rms = float(np.sqrt(np.nanmean(v**2)))
         if rms < SPEED_FOR_DRAG:
             out.append({"effects": ["linear_drag", "quadratic_drag"],
-                        "reason": f"speed along body {axis} is {rms:.2f} m/s rms: drag along body {axis} is "
-                                  "undetermined (it is left out of the model)",
+                        "reason": f"speed along body {axis} is {rms:.2f} m/s rms: too slow to determine drag "
+                                  f"along body {axis}",
                         "manoeuvre": f"fly back and forth along body {axis} at 1 m/s or more"})
     if len(thrust):
         variation = float(np.std(thrust) / max(np.mean(thrust), 1e-9))

@@ -20,6 +20,12 @@ Keys:
     candidate explains, with where it is (regressor, range, direction, times).
 ``closed_loop``
     ``null``, or the closed-loop check (:mod:`discovery.closed_loop`).
+``undetermined``
+    parameters the flight did not determine (:mod:`discovery.determination`): value,
+    standard error, why, what was done (nulled or the effect left out of the model
+    file) and the manoeuvre that would determine it.
+``alike``
+    candidates the flight could not tell apart, with the manoeuvre that would.
 ``notes``
     what was left out of the logs and why (e.g. time resting on the ground).
 ``limits``
@@ -38,6 +44,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from discovery.determination import separating_manoeuvre
 
 __all__ = ["build_report", "write_report", "format_summary"]
 
@@ -87,6 +95,7 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "selection": [{"chosen": step.chosen, "cv_mse_before_N2": step.mse_before, "cv_mse_after_N2": step.mse_after,
                        "tried": step.tried} for step in selection.steps],
         "removed_by_backward_check": selection.removed,
+        "fuller_forms_tried": selection.forms,
         "prediction_windows": int(len(found.prediction_errors_before_)),
         "runtime_s": round(found.runtime_s_, 3),
     }
@@ -99,6 +108,9 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "closed_loop": closed_loop,
         "notes": list(found.notes_),
         "limits": list(found.limits_),
+        "undetermined": [{k: v for k, v in case.items() if k not in ("name", "index")}
+                         for case in found.undetermined_],
+        "alike": [{**a, "manoeuvre": separating_manoeuvre(a["chosen"], a["alike"])} for a in selection.alike],
         "details": details,
     }
     return _clean(report)
@@ -160,6 +172,12 @@ def format_summary(report: dict[str, Any]) -> str:
             lines.append(f"held-out open-loop prediction RMS: {_number(b['prediction_rms_m'])} m -> "
                          f"{_number(a['prediction_rms_m'])} m "
                          f"({_reduction(b['prediction_rms_m'], a['prediction_rms_m'])} smaller)")
+    for case in report.get("undetermined") or []:
+        lines.append(f"undetermined {case['effect']}.{case['parameter']} = {_fmt(case['value'])} +- "
+                     f"{_fmt(case['std'])}: {case['reason']}; {case['action']}; to determine: {case['manoeuvre']}")
+    for pair in report.get("alike") or []:
+        lines.append(f"cannot tell {pair['chosen']} from {pair['alike']} in this flight (scores within one "
+                     f"parameter's price); to tell them apart: {pair['manoeuvre']}")
     for note in report.get("notes") or []:
         if not note.startswith("likely sidecar error"):
             lines.append(f"note: {note}")

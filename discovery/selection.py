@@ -3,25 +3,35 @@
 Every candidate is judged by its cross-validated residual: the log is cut into time
 blocks dealt round robin to folds, each fold is predicted by parameters fitted on the
 others (:meth:`discovery.fitting.EffectFit.cross_validate`), and the held-out mean
-squared force residual per world axis ``MSE_a`` is what a model scores. The score is a
-Gaussian log-likelihood with its own variance per axis (the noise is far from equal:
-thrust noise lives along body z) plus a price per parameter::
+squared force residual (the vector norm, summed over the world axes) is what a model
+scores. The score is the Gaussian log-likelihood of the force-gap vector plus a price
+per parameter::
 
-    score(M) = sum_a N_a ln(MSE_a(M)) + c p(M),      c = max(chi2_1(1 - alpha), ln N)
+    score(M) = 3 N ln(MSE(M)) + c p(M),      MSE = sum_a MSE_a,   c = max(chi2_1(1 - alpha), ln 3N)
 
-where ``p(M)`` counts parameters, ``N_a`` is the number of independent residual values
-on axis ``a`` (samples divided by the smoothing kernel's correlation length
-``1 / sum(w^2)``), ``N = sum_a N_a``, and ``alpha = 1e-4``: a parameter has to raise the
-held-out likelihood as much as a 3.9-sigma detection would (``c = 15.1``), or by the
-BIC's ``ln N`` on very long logs. This matters: the mean of the simulator's thrust
-noise over a 30 s flight is itself a constant force of a few millinewtons that
-cross-validation confirms; only a price calibrated to the noise keeps it from being
-named.
+so every axis counts by its physical share of the force gap: a tiny gain on the
+quietest axis cannot outweigh halving the error on another (a score summing each
+axis' own log-error would let it). ``p(M)`` counts parameters, ``N`` is the number of
+independent residual values per axis (samples divided by the smoothing kernel's
+correlation length ``1 / sum(w^2)``), and ``alpha = 1e-4``: a parameter has to raise
+the held-out likelihood as much as a 3.9-sigma detection would (``c = 15.1``), or by
+the BIC's ``ln 3N`` on very long logs.
 
 Forward selection adds, one at a time, the candidate that lowers the score most (all
 parameters of the model refitted jointly, so two effects present together are both
-found), and stops when no candidate lowers it. A backward pass then drops any effect
-whose removal does not raise the score, so nothing stays that does not pay for itself.
+found) and that explains a material share (:data:`MIN_SHARE`) of the nominal model's
+held-out force-gap energy, and stops when none does. A backward pass then drops any
+effect whose removal does not raise the score or that no longer explains a material
+share next to the others, so nothing stays that does not pay for itself.
+
+Then the literature's fuller forms (:data:`VARIANTS`: wall suction scaled by rotor
+thrust, ground and ceiling effects with the distance offset, quadratic drag on the
+air-relative velocity with a fitted steady wind, which may replace a steady force)
+replace a chosen effect where the data prefer them by the same score.
+
+Candidates the flight cannot tell apart are recorded (:attr:`Selection.alike`): a
+runner-up of the chosen step whose score is within one parameter price of the
+winner's and that explains a material share on its own.
 """
 
 from __future__ import annotations
@@ -34,12 +44,19 @@ from scipy.stats import chi2
 
 from discovery.fitting import EffectFit, FitResult, applicable
 from discovery.residuals import FlightData
-from wall_env.effects import Effect
+from wall_env.effects import Effect, make_effect
 
-__all__ = ["ALPHA", "Candidate", "Step", "Selection", "effective_samples", "parameter_price", "score",
+__all__ = ["ALPHA", "MIN_SHARE", "VARIANTS", "Candidate", "Step", "Selection", "effective_samples", "parameter_price", "score",
            "forward_selection", "fit_only"]
 
 ALPHA = 1e-4  # significance a parameter must reach on held-out data
+MIN_SHARE = 0.01  # share of the nominal held-out force-gap energy an effect must explain to stay
+VARIANTS: dict[str, list[dict]] = {
+    "wall_suction": [{"thrust_scaling": True}],
+    "ground_effect": [{"distance_offset": True}],
+    "ceiling_effect": [{"distance_offset": True}],
+    "quadratic_drag": [{"wind": True}],
+}
 
 
 def effective_samples(data: FlightData) -> float:
@@ -52,14 +69,14 @@ def effective_samples(data: FlightData) -> float:
 
 
 def parameter_price(n_eff_per_axis: float, alpha: float = ALPHA) -> float:
-    """``max(chi2_1 quantile at 1 - alpha, ln N)``: what each parameter must buy in ``2 x`` log-likelihood."""
+    """``max(chi2_1 quantile at 1 - alpha, ln 3N)``: what each parameter must buy in ``2 x`` log-likelihood."""
     return max(float(chi2.ppf(1.0 - alpha, 1)), math.log(3.0 * n_eff_per_axis))
 
 
 def score(mse_axes: np.ndarray, n_params: int, n_eff_per_axis: float, alpha: float = ALPHA) -> float:
-    """``sum_a N_a ln(MSE_a) + c p``: lower is better."""
-    mse_axes = np.maximum(np.asarray(mse_axes, dtype=float), 1e-300)
-    return float(n_eff_per_axis * np.sum(np.log(mse_axes))) + parameter_price(n_eff_per_axis, alpha) * n_params
+    """``3 N ln(sum_a MSE_a) + c p``: lower is better."""
+    total = max(float(np.sum(np.asarray(mse_axes, dtype=float))), 1e-300)
+    return 3.0 * n_eff_per_axis * math.log(total) + parameter_price(n_eff_per_axis, alpha) * n_params
 
 
 @dataclass
@@ -98,6 +115,8 @@ class Selection:
     removed: list[str] = field(default_factory=list)
     explained: dict[str, float] = field(default_factory=dict)  # name -> share of the nominal held-out energy
     n_eff: float = 1.0  # independent residual values per axis
+    alike: list[dict] = field(default_factory=list)  # candidates the flight could not tell apart
+    forms: list[dict] = field(default_factory=list)  # fuller literature forms tried on the chosen effects
 
 
 def _mse_axes(parts: list[np.ndarray]) -> np.ndarray:
@@ -132,50 +151,103 @@ def _params_by_name(candidate: Candidate) -> dict[str, np.ndarray]:
 
 
 def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: list[Effect], max_effects: int = 3,
-                      progress=None) -> Selection:
-    """Greedy forward selection (then a backward check) over ``candidates``; see the module docstring."""
+                      progress=None, variants: dict[str, list[dict]] | None = None) -> Selection:
+    """Greedy forward selection, a backward check, then the fuller forms; see the module docstring."""
     templates = {e.name: e for e in candidates if applicable(e, data)}
     n_eff = effective_samples(data)
+    price = parameter_price(n_eff)
     evaluator = _Evaluator(data, r_nom, templates, n_eff)
     nominal = evaluator.evaluate([])
     current = nominal
     steps: list[Step] = []
+    alike: list[dict] = []
+
+    def material(better: Candidate, worse: Candidate) -> bool:
+        return nominal.mse > 0 and (worse.mse - better.mse) / nominal.mse >= MIN_SHARE
+
     while len(current.names) < max_effects:
         remaining = [n for n in templates if n not in current.names]
         if not remaining:
             break
         tried = []
-        best = None
+        scored = []
         for name in remaining:
             if progress is not None:
                 progress(f"trying {' + '.join(current.names + [name])}")
             cand = evaluator.evaluate(current.names + [name], previous=_params_by_name(current))
             gain = 1.0 - cand.mse / current.mse if current.mse > 0 else 0.0
             tried.append({"name": name, "cv_mse_N2": cand.mse, "gain": gain, "score": cand.score,
-                          "params": cand.fit.effects[-1].params_dict()})
-            if best is None or cand.score < best.score:
-                best = cand
+                          "material": material(cand, current), "params": cand.fit.effects[-1].params_dict()})
+            if cand.score < current.score and material(cand, current):
+                scored.append(cand)
         tried.sort(key=lambda r: r["score"])
-        if best is None or best.score >= current.score:
+        if not scored:
             steps.append(Step(tried, None, current.mse, current.mse))
             break
+        scored.sort(key=lambda c: c.score)
+        best = scored[0]
+        for other in scored[1:]:
+            if other.score - best.score < price:
+                alike.append({"chosen": best.names[-1], "alike": other.names[-1],
+                              "score_difference": round(other.score - best.score, 2),
+                              "explained_chosen": round((current.mse - best.mse) / nominal.mse, 4),
+                              "explained_alike": round((current.mse - other.mse) / nominal.mse, 4)})
         steps.append(Step(tried, best.names[-1], current.mse, best.mse))
         current = best
-    # backward check: drop what does not pay for itself next to the others
+    current, removed = _backward(evaluator, current, material)
+    current, evaluator, forms = _fuller_forms(data, r_nom, evaluator, current, variants if variants is not None
+                                              else VARIANTS, material, progress)
+    current, more = _backward(evaluator, current, material)
+    removed += more
+    explained = _sequential_explained(evaluator, current, nominal)
+    alike = [a for a in alike if a["chosen"] in current.names]
+    return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms)
+
+
+def _backward(evaluator: _Evaluator, current: Candidate, material) -> tuple[Candidate, list[str]]:
+    """Drop what does not pay for itself next to the others, or no longer explains a material share."""
     removed = []
     changed = True
-    while changed and len(current.names) > 1:
+    while changed and current.names:
         changed = False
         for name in list(current.names):
             reduced_names = [n for n in current.names if n != name]
             reduced = evaluator.evaluate(reduced_names, previous=_params_by_name(current))
-            if reduced.score <= current.score:
+            if reduced.score <= current.score or not material(current, reduced):
                 current = reduced
                 removed.append(name)
                 changed = True
                 break
-    explained = _sequential_explained(evaluator, current, nominal)
-    return Selection(current, nominal, steps, removed, explained, n_eff)
+    return current, removed
+
+
+def _fuller_forms(data: FlightData, r_nom: list[np.ndarray], evaluator: _Evaluator, current: Candidate,
+                  variants: dict[str, list[dict]], material, progress) -> tuple[Candidate, _Evaluator, list[dict]]:
+    """Replace chosen effects by their fuller literature forms where the score prefers them."""
+    forms = []
+    for name in list(current.names):
+        for options in variants.get(name, []):
+            template = evaluator.templates[name]
+            if all(template.option_values.get(k) == v for k, v in options.items()):
+                continue
+            variant = make_effect(name, **{**template.option_values, **options})
+            templates = {**evaluator.templates, name: variant}
+            trial = _Evaluator(data, r_nom, templates, evaluator.n_eff)
+            previous = {k: v for k, v in _params_by_name(current).items() if k != name}
+            sets = [current.names]
+            if "w" in {p.name for p in variant.parameters} and "constant_force" in current.names:
+                sets.append([n for n in current.names if n != "constant_force"])  # the wind may be the steady force
+            for names in sets:
+                if progress is not None:
+                    progress(f"trying {' + '.join(names)} with {name} {options}")
+                cand = trial.evaluate(names, previous={k: v for k, v in previous.items() if k in names})
+                better = cand.score < current.score
+                forms.append({"effect": name, "options": options, "with": names, "score": cand.score,
+                              "score_before": current.score, "chosen": bool(better)})
+                if better:
+                    current, evaluator = cand, trial
+                    break
+    return current, evaluator, forms
 
 
 def _sequential_explained(evaluator: _Evaluator, chosen: Candidate, nominal: Candidate) -> dict[str, float]:

@@ -38,13 +38,14 @@ from typing import Any
 
 import numpy as np
 
+from discovery.determination import determined, restrict
 from discovery.coverage import REST_THRUST_SHARE, flight_limits, resting_on_ground, scene_problems
 from discovery.fitting import out_of_fold_residuals
 from discovery.flight_log import FlightLog
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, prepare
-from discovery.selection import Selection, fit_only, forward_selection
+from discovery.selection import fit_only, forward_selection
 from wall_env.aero import AeroModel
 from wall_env.effects import EFFECTS, Effect, make_effect
 from wall_env.model_file import FlightModel
@@ -188,9 +189,12 @@ class Discovery:
             selection = forward_selection(data, r_nom, templates, self.max_effects, progress=self._say)
         self.selection_ = selection
         chosen = selection.chosen
-        self.effects_ = list(chosen.fit.effects)
-        self.param_std_ = chosen.fit.std_dicts()
-        self.explained_fraction_ = dict(selection.explained)
+        # only what the flight determined goes into the model (discovery.determination)
+        self.effects_, self.param_std_, self.undetermined_ = determined(list(chosen.fit.effects),
+                                                                        chosen.fit.std_dicts())
+        kept = {e.name for e in self.effects_}
+        self.explained_fraction_ = {k: v for k, v in selection.explained.items() if k in kept}
+        fold_theta = [self._restricted_theta(chosen.fit.effects, theta_k) for theta_k in chosen.fit.fold_theta]
 
         # 4: the fix
         self.model_ = FlightModel(vehicle, list(self.effects_),
@@ -198,10 +202,9 @@ class Discovery:
 
         # 5: the proof, on held-out data
         self._say("open-loop predictions")
-        self.residual_after_ = data.concat(out_of_fold_residuals(data, chosen.fit.effects, chosen.fit.fold_theta,
-                                                                 r_nom))
+        self.residual_after_ = data.concat(out_of_fold_residuals(data, self.effects_, fold_theta, r_nom))
         self.prediction_before_ = prediction_pairs(data, nominal.aero_model(), None, self.horizon_s, self.stride_s)
-        fold_models = self._fold_theta(selection)
+        fold_models = self._fold_theta(fold_theta)
         self.prediction_after_ = prediction_pairs(data, self.model_.aero_model(), fold_models, self.horizon_s,
                                                   self.stride_s)
         self.prediction_errors_before_ = np.linalg.norm(self.prediction_before_[1] - self.prediction_before_[2], axis=1)
@@ -232,7 +235,7 @@ class Discovery:
         self.usable_ = False
         self.notes_.append(reason)
         vehicle = self.logs_[0].vehicle.to_vehicle_params()
-        self.effects_, self.param_std_, self.explained_fraction_ = [], [], {}
+        self.effects_, self.param_std_, self.explained_fraction_, self.undetermined_ = [], [], {}, []
         self.model_ = FlightModel(vehicle, [])
         self.selection_ = None
         self.limits_ = [{"effects": sorted(EFFECTS), "reason": reason,
@@ -247,17 +250,25 @@ class Discovery:
         self.runtime_s_ = time.perf_counter() - started
         return self
 
-    def _fold_theta(self, selection: Selection) -> list[np.ndarray] | None:
+    def _restricted_theta(self, effects: list[Effect], theta: np.ndarray) -> np.ndarray:
+        """One fold's parameters of ``effects`` with the same undetermined entries nulled or left out."""
+        fold_effects, index = [], 0
+        for effect in effects:
+            fold_effects.append(effect.with_params(theta[index:index + effect.param_size]))
+            index += effect.param_size
+        kept = restrict(fold_effects, self.undetermined_)
+        return np.concatenate([e.param_vector() for e in kept]) if kept else np.zeros(0)
+
+    def _fold_theta(self, fold_theta: list[np.ndarray]) -> list[np.ndarray] | None:
         """Per-fold parameters of the full model (nominal drag plus effects) for predictions."""
-        fit = selection.chosen.fit
-        if not fit.fold_theta:
+        if not fold_theta:
             return None
         full = self.model_.aero_model()
         out = []
-        for theta_k in fit.fold_theta:
+        for theta_k in fold_theta:
             effects = []
             index = 0
-            for effect in fit.effects:
+            for effect in self.effects_:
                 effects.append(effect.with_params(theta_k[index:index + effect.param_size]))
                 index += effect.param_size
             fold_model = FlightModel(self.model_.vehicle, effects).aero_model()
