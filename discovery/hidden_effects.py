@@ -8,7 +8,9 @@ and compares what it found with what was flown. ``wall-inspector bench-discover
 --acceptance`` prints the figures.
 
 Ranges: wall suction k_s 3.5-8 N/m, d_thr 0.11-0.15 m (paper: 4.1 N/m, 0.132 m);
-ground and ceiling effective radius 6-10 cm and 5-8 cm, their distance offset 1-4 cm;
+ground and ceiling effective radius 6-10 cm and 5-8 cm (6-9 cm with the distance offset
+of 1-4 cm, flown 4 to 22 cm from the surface); a steady force paired with wall suction
+points away from the wall;
 thrust error 5-15 % either way; steady force 0.15-0.5 N per axis; extra linear drag
 0.1-0.4 N s/m per axis; quadratic drag 0.05-0.15 N s^2/m^2 per axis, with a steady
 horizontal wind of 1-3 m/s in the ``_wind`` form.
@@ -28,10 +30,11 @@ ARM = 0.1 / math.sqrt(2.0)  # the default vehicle's rotor offset along body x (m
 FORMS = ("wall_suction", "wall_suction_scaled", "ground_effect", "ground_effect_offset", "ceiling_effect",
          "ceiling_effect_offset", "thrust_scale", "constant_force", "linear_drag", "quadratic_drag",
          "quadratic_drag_wind")
-PAIRS = (("wall_suction", "constant_force"), ("wall_suction_scaled", "thrust_scale"),
+PAIRS = (("wall_suction", "constant_force"), ("wall_suction_scaled", "constant_force"),
          ("ground_effect_offset", "constant_force"), ("ceiling_effect_offset", "thrust_scale"),
-         ("linear_drag", "constant_force"), ("quadratic_drag_wind", "thrust_scale"),
+         ("ground_effect", "thrust_scale"), ("linear_drag", "constant_force"), ("quadratic_drag_wind", "thrust_scale"),
          ("thrust_scale", "constant_force"), ("quadratic_drag", "constant_force"))
+_NEAR_WIDE = {"amplitude": (0.6, 0.6, 0.09), "period": (7.0, 9.0, 3.5)}  # 0.04 to 0.22 m from the surface
 
 
 def _suction_survey(k_s: float, d_thr: float) -> dict[str, Any]:
@@ -52,13 +55,17 @@ def draw(form: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str,
                                                              "survey": _suction_survey(k_s, d_thr)}
     if form.startswith("ground_effect"):
         params = {"radius": rng.uniform(0.06, 0.10)}
-        if form == "ground_effect_offset":
+        if form == "ground_effect_offset":  # two parameters of one curve: a wider range of heights tells them apart
             params = {"radius": rng.uniform(0.06, 0.09), "offset": rng.uniform(0.01, 0.04)}
+            return {"name": "ground_effect", "params": params}, {
+                "scenario": "ground-survey", "survey": {**_NEAR_WIDE, "centre": (1.5, 0.0, 0.13)}}
         return {"name": "ground_effect", "params": params}, {"scenario": "ground-survey"}
     if form.startswith("ceiling_effect"):
         params = {"radius": rng.uniform(0.05, 0.08)}
         if form == "ceiling_effect_offset":
             params = {"radius": rng.uniform(0.06, 0.09), "offset": rng.uniform(0.01, 0.04)}
+            return {"name": "ceiling_effect", "params": params}, {
+                "scenario": "ceiling-survey", "survey": {**_NEAR_WIDE, "centre": (1.5, 0.0, 1.87)}}
         return {"name": "ceiling_effect", "params": params}, {"scenario": "ceiling-survey"}
     if form == "thrust_scale":
         return {"name": form, "params": {"scale": 1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(0.05, 0.15)}}, \
@@ -82,6 +89,8 @@ def draw_pair(forms: tuple[str, str], rng: np.random.Generator) -> tuple[list[di
     """Two forms flown together, in the flight of the first (the second acts everywhere)."""
     first, fly_kwargs = draw(forms[0], rng)
     second, _ = draw(forms[1], rng)
+    if first["name"] == "wall_suction" and second["name"] == "constant_force":
+        second["params"]["F"][0] = abs(second["params"]["F"][0])  # a breeze off the wall (x = 0, normal +x)
     return [first, second], fly_kwargs
 
 

@@ -95,7 +95,7 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "selection": [{"chosen": step.chosen, "cv_mse_before_N2": step.mse_before, "cv_mse_after_N2": step.mse_after,
                        "tried": step.tried} for step in selection.steps],
         "removed_by_backward_check": selection.removed,
-        "fuller_forms_tried": selection.forms,
+        "forms_chosen": selection.forms,
         "prediction_windows": int(len(found.prediction_errors_before_)),
         "runtime_s": round(found.runtime_s_, 3),
     }

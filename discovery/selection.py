@@ -24,10 +24,11 @@ held-out force-gap energy, and stops when none does. A backward pass then drops 
 effect whose removal does not raise the score or that no longer explains a material
 share next to the others, so nothing stays that does not pay for itself.
 
-Then the literature's fuller forms (:data:`VARIANTS`: wall suction scaled by rotor
-thrust, ground and ceiling effects with the distance offset, quadratic drag on the
-air-relative velocity with a fitted steady wind, which may replace a steady force)
-replace a chosen effect where the data prefer them by the same score.
+The literature's fuller forms (:data:`VARIANTS`: wall suction scaled by rotor thrust,
+ground and ceiling effects with the distance offset, quadratic drag on the
+air-relative velocity with a fitted steady wind) are candidates of their own (keys
+such as ``quadratic_drag[wind]``), judged by the same score, at most one form per
+effect, and only when their extra parameters are determined.
 
 Candidates the flight cannot tell apart are recorded (:attr:`Selection.alike`): a
 runner-up of the chosen step whose score is within one parameter price of the
@@ -116,7 +117,7 @@ class Selection:
     explained: dict[str, float] = field(default_factory=dict)  # name -> share of the nominal held-out energy
     n_eff: float = 1.0  # independent residual values per axis
     alike: list[dict] = field(default_factory=list)  # candidates the flight could not tell apart
-    forms: list[dict] = field(default_factory=list)  # fuller literature forms tried on the chosen effects
+    forms: list[dict] = field(default_factory=list)  # the form (candidate key) of each chosen effect
 
 
 def _mse_axes(parts: list[np.ndarray]) -> np.ndarray:
@@ -135,10 +136,12 @@ class _Evaluator:
         self.cache: dict[tuple[str, ...], Candidate] = {}
 
     def evaluate(self, names: list[str], previous: dict[str, np.ndarray] | None = None) -> Candidate:
+        """Fit the candidate keys ``names``; ``previous`` holds starting values by key."""
         key = tuple(names)
         if key not in self.cache:
             problem = EffectFit(self.data, [self.templates[n] for n in names], self.r_nom, self.terms)
-            fit = problem.fit(previous=previous)
+            start = {self.templates[n].name: previous[n] for n in names if previous and n in previous}
+            fit = problem.fit(previous=start)
             cv, _ = problem.cross_validate(fit)
             axes = _mse_axes(cv)
             self.cache[key] = Candidate(list(names), fit, cv, float(axes.sum()), axes,
@@ -147,13 +150,34 @@ class _Evaluator:
 
 
 def _params_by_name(candidate: Candidate) -> dict[str, np.ndarray]:
-    return {e.name: e.param_vector() for e in candidate.fit.effects}
+    """Fitted parameter vectors by candidate key."""
+    return {key: e.param_vector() for key, e in zip(candidate.names, candidate.fit.effects)}
+
+
+def variant_key(name: str, options: dict) -> str:
+    """The candidate key of a fuller form, e.g. ``quadratic_drag[wind]``."""
+    return f"{name}[{','.join(sorted(k for k, v in options.items() if v))}]"
+
+
+def effect_name(key: str) -> str:
+    return key.split("[", 1)[0]
+
+
+def _with_variants(templates: dict[str, Effect], variants: dict[str, list[dict]]) -> dict[str, Effect]:
+    out = dict(templates)
+    for name, template in templates.items():
+        for options in variants.get(name, []):
+            if all(template.option_values.get(k) == v for k, v in options.items()):
+                continue
+            out[variant_key(name, options)] = make_effect(name, **{**template.option_values, **options})
+    return out
 
 
 def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: list[Effect], max_effects: int = 3,
                       progress=None, variants: dict[str, list[dict]] | None = None) -> Selection:
-    """Greedy forward selection, a backward check, then the fuller forms; see the module docstring."""
-    templates = {e.name: e for e in candidates if applicable(e, data)}
+    """Greedy forward selection over the candidates and their fuller forms, then a backward check."""
+    base = {e.name: e for e in candidates if applicable(e, data)}
+    templates = _with_variants(base, VARIANTS if variants is None else variants)
     n_eff = effective_samples(data)
     price = parameter_price(n_eff)
     evaluator = _Evaluator(data, r_nom, templates, n_eff)
@@ -166,19 +190,21 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
         return nominal.mse > 0 and (worse.mse - better.mse) / nominal.mse >= MIN_SHARE
 
     while len(current.names) < max_effects:
-        remaining = [n for n in templates if n not in current.names]
+        taken = {effect_name(k) for k in current.names}
+        remaining = [k for k in templates if effect_name(k) not in taken]
         if not remaining:
             break
         tried = []
         scored = []
-        for name in remaining:
+        for key in remaining:
             if progress is not None:
-                progress(f"trying {' + '.join(current.names + [name])}")
-            cand = evaluator.evaluate(current.names + [name], previous=_params_by_name(current))
+                progress(f"trying {' + '.join(current.names + [key])}")
+            cand = evaluator.evaluate(current.names + [key], previous=_params_by_name(current))
             gain = 1.0 - cand.mse / current.mse if current.mse > 0 else 0.0
-            tried.append({"name": name, "cv_mse_N2": cand.mse, "gain": gain, "score": cand.score,
+            usable = cand.score < current.score and material(cand, current) and _extra_determined(cand, key)
+            tried.append({"name": key, "cv_mse_N2": cand.mse, "gain": gain, "score": cand.score,
                           "material": material(cand, current), "params": cand.fit.effects[-1].params_dict()})
-            if cand.score < current.score and material(cand, current):
+            if usable:
                 scored.append(cand)
         tried.sort(key=lambda r: r["score"])
         if not scored:
@@ -187,21 +213,34 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
         scored.sort(key=lambda c: c.score)
         best = scored[0]
         for other in scored[1:]:
-            if other.score - best.score < price:
-                alike.append({"chosen": best.names[-1], "alike": other.names[-1],
+            if other.score - best.score < price and effect_name(other.names[-1]) != effect_name(best.names[-1]):
+                alike.append({"chosen": effect_name(best.names[-1]), "alike": effect_name(other.names[-1]),
                               "score_difference": round(other.score - best.score, 2),
                               "explained_chosen": round((current.mse - best.mse) / nominal.mse, 4),
                               "explained_alike": round((current.mse - other.mse) / nominal.mse, 4)})
         steps.append(Step(tried, best.names[-1], current.mse, best.mse))
         current = best
     current, removed = _backward(evaluator, current, material)
-    current, evaluator, forms = _fuller_forms(data, r_nom, evaluator, current, variants if variants is not None
-                                              else VARIANTS, material, progress)
-    current, more = _backward(evaluator, current, material)
-    removed += more
     explained = _sequential_explained(evaluator, current, nominal)
-    alike = [a for a in alike if a["chosen"] in current.names]
+    explained = {effect_name(k): v for k, v in explained.items()}
+    chosen_names = {effect_name(k) for k in current.names}
+    alike = [a for a in alike if a["chosen"] in chosen_names]
+    forms = [{"effect": effect_name(k), "form": k} for k in current.names]
     return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms)
+
+
+def _extra_determined(candidate: Candidate, key: str) -> bool:
+    """A fuller form counts only if some entry of its extra parameters is determined (else the plain form
+    says as much); undetermined entries (a wind's vertical component, say) are nulled later."""
+    if "[" not in key:
+        return True
+    from discovery.determination import undetermined_cases
+
+    effect = candidate.fit.effects[-1]
+    std = candidate.fit.std_dicts()[-1]
+    extra = [p for p in effect.parameters if p not in type(effect).parameters]
+    cases = undetermined_cases([effect], [std])
+    return sum(1 for c in cases if c["name"] in {p.name for p in extra}) < sum(p.size for p in extra)
 
 
 def _backward(evaluator: _Evaluator, current: Candidate, material) -> tuple[Candidate, list[str]]:
@@ -219,35 +258,6 @@ def _backward(evaluator: _Evaluator, current: Candidate, material) -> tuple[Cand
                 changed = True
                 break
     return current, removed
-
-
-def _fuller_forms(data: FlightData, r_nom: list[np.ndarray], evaluator: _Evaluator, current: Candidate,
-                  variants: dict[str, list[dict]], material, progress) -> tuple[Candidate, _Evaluator, list[dict]]:
-    """Replace chosen effects by their fuller literature forms where the score prefers them."""
-    forms = []
-    for name in list(current.names):
-        for options in variants.get(name, []):
-            template = evaluator.templates[name]
-            if all(template.option_values.get(k) == v for k, v in options.items()):
-                continue
-            variant = make_effect(name, **{**template.option_values, **options})
-            templates = {**evaluator.templates, name: variant}
-            trial = _Evaluator(data, r_nom, templates, evaluator.n_eff)
-            previous = {k: v for k, v in _params_by_name(current).items() if k != name}
-            sets = [current.names]
-            if "w" in {p.name for p in variant.parameters} and "constant_force" in current.names:
-                sets.append([n for n in current.names if n != "constant_force"])  # the wind may be the steady force
-            for names in sets:
-                if progress is not None:
-                    progress(f"trying {' + '.join(names)} with {name} {options}")
-                cand = trial.evaluate(names, previous={k: v for k, v in previous.items() if k in names})
-                better = cand.score < current.score
-                forms.append({"effect": name, "options": options, "with": names, "score": cand.score,
-                              "score_before": current.score, "chosen": bool(better)})
-                if better:
-                    current, evaluator = cand, trial
-                    break
-    return current, evaluator, forms
 
 
 def _sequential_explained(evaluator: _Evaluator, chosen: Candidate, nominal: Candidate) -> dict[str, float]:
