@@ -38,7 +38,8 @@ from wall_env.effects import EFFECTS
 
 __all__ = ["add_arguments", "run", "OUTPUT_FILES"]
 
-OUTPUT_FILES = ("model.json", "report.json", "residual_vs_regressor.png", "residual_time.png", "prediction.png")
+OUTPUT_FILES = ("model.json", "report.json", "residual_vs_regressor.png", "residual_time.png", "prediction.png",
+                "unexplained_shape.png")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

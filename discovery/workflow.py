@@ -27,7 +27,10 @@ The five steps (issue 5):
 All held-out figures use the same cross-validation folds: each time block is predicted
 by parameters fitted without it. A significant residual left after the chosen
 effects (its cross-validated bin means against some regressor predict at least
-``unexplained_threshold`` of it) is reported as ``unexplained`` with where it is.
+``unexplained_threshold`` of it) is reported as ``unexplained`` with where it is and its
+shape: the residual along its mean direction, piecewise linear in the localising
+quantity (:func:`discovery.regressors.piecewise_linear`, plotted by
+:mod:`discovery.plots`).
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ from discovery.coverage import REST_THRUST_SHARE, flight_limits, resting_on_grou
 from discovery.fitting import out_of_fold_residuals
 from discovery.flight_log import FlightLog
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
-from discovery.regressors import describe_force, localise_residual, regressors
+from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, prepare
 from discovery.selection import fit_only, forward_selection
 from wall_env.aero import AeroModel
@@ -226,9 +229,24 @@ class Discovery:
         self.unexplained_ = None
         if left["regressor"] is not None and left["explained_fraction"] >= self.unexplained_threshold \
                 and left.get("range") is not None:
-            self.unexplained_ = {"force_rms_N": _rms(self.residual_after_), "where": _public_where(left)}
+            self.unexplained_ = {"force_rms_N": _rms(self.residual_after_), "where": _public_where(left),
+                                 "shape": self._shape(left)}
         self.runtime_s_ = time.perf_counter() - started
         return self
+
+    def _shape(self, where: dict) -> dict | None:
+        """The unexplained residual along its mean direction, piecewise linear in its localising quantity."""
+        reg = next((r for r in self.regressors_ if r.name == where.get("regressor")), None)
+        direction = where.get("direction_world")
+        if reg is None or direction is None:
+            return None
+        along = self.residual_after_ @ np.asarray(direction, dtype=float)
+        shape = piecewise_linear(reg.values, along)
+        if shape is None:
+            return None
+        return {"regressor": reg.name, "unit": reg.unit, "direction_world": direction,
+                "force_N_at_knots": shape["values"], "knots": shape["knots"],
+                "explained_fraction": shape["explained_fraction"]}
 
     def _nothing_to_fit(self, reason: str, started: float) -> Discovery:
         """Results of a run whose logs hold nothing to fit: no effects, the nominal model, and why."""

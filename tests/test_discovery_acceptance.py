@@ -198,6 +198,11 @@ def test_a_residual_no_candidate_explains_is_reported_as_unexplained_with_where_
     assert where["range"][0] < 0.1 and where["range"][1] < 0.25
     assert where["direction_world"][2] > 0.95  # the ground pushes up
     assert report["unexplained"]["force_rms_N"] > 0.1
+    # its shape, free of any effect's form: strong near the ground, fading with height
+    shape = report["unexplained"]["shape"]
+    assert shape["regressor"] == "height above ground" and shape["explained_fraction"] > 0.5
+    assert shape["knots"] == sorted(shape["knots"])
+    assert shape["force_N_at_knots"][0] > 3 * abs(shape["force_N_at_knots"][-1])
 
 
 def test_a_log_with_a_dropout_is_processed_in_two_segments(paper_log, tmp_path):
