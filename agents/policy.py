@@ -111,7 +111,8 @@ def load_policy(source: str | Path, env=None, verify: bool = True, base_kwargs: 
                          "load_policy can build the base controller for that environment")
     from agents.residual import ResidualPolicy, make_base_controller
 
-    kwargs = {**residual.get("base_kwargs", {}), **(base_kwargs or {})}
+    # agents saved before controller presets existed were trained on the authors' settings
+    kwargs = {"preset": "paper", **residual.get("base_kwargs", {}), **(base_kwargs or {})}
     base = make_base_controller(residual["base"], env, **kwargs)
     return ResidualPolicy(base, policy, residual["scale"], name=f"PPO residual on {residual['base']}",
                           base_name=residual["base"])

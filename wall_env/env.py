@@ -91,6 +91,8 @@ class WallInspectorEnv(gym.Env):
     k_s, d_thr: wall-suction scale (N/m, default 4.1) and threshold (m, default 0.132).
     standoff: wall to reference centre of mass (m; corridor: half-width). Task default if None.
     altitude, duration: reference height (m) and episode length (s). Task defaults if None.
+    task_params: shape parameters of the task's reference (:class:`~wall_env.tasks.TaskParameter`),
+        e.g. ``{"radius": 0.3, "period": 6.0}`` for ``WallCircle``; defaults for those not given.
     noise: add command noise; ``thrust_noise_std`` (N) and ``rate_noise_std`` (rad/s) set it.
     effects: further effects in the simulator, e.g. ``{"ground_effect": {"radius": 0.08}}``, or
         options of the suction, ``{"wall_suction": {"thrust_scaling": True}}``.
@@ -120,6 +122,7 @@ class WallInspectorEnv(gym.Env):
         standoff: float | None = None,
         altitude: float | None = None,
         duration: float | None = None,
+        task_params: dict[str, float] | None = None,
         noise: bool = True,
         thrust_noise_std: float = 0.2,
         rate_noise_std: float = 0.2,
@@ -199,7 +202,9 @@ class WallInspectorEnv(gym.Env):
             ceiling_z = check_range("ceiling_z", ceiling_z, self.altitude + 0.1, 1000.0)
         self._base_scene = Scene((), ground_z, ceiling_z)
         self.randomize = self._check_randomize(randomize or {})
-        self.scene, self.reference = self.task.build(self.standoff, self.altitude, self.duration, self._base_scene)
+        self.task_params = self.task.check_params(task_params)
+        self.scene, self.reference = self.task.scene_and_reference(self.standoff, self.altitude, self.duration,
+                                                                   self._base_scene, self.task_params)
 
         # ---------------------------------------------------------- simulator and PyBullet
         self._simulator = Simulator(vehicle_params, truth, self.scene, self.control_dt, physics_substeps)
@@ -290,7 +295,8 @@ class WallInspectorEnv(gym.Env):
             theta[self._truth.slices()[self._suction_index]] = type(suction)(**values, **suction.option_values).param_vector()
         mass = sample.get("mass", self.vehicle.mass)
         standoff = sample.get("standoff", self.standoff)
-        scene, reference = self.task.build(standoff, self.altitude, self.duration, self._base_scene)
+        scene, reference = self.task.scene_and_reference(standoff, self.altitude, self.duration, self._base_scene,
+                                                         self.task_params)
         if scene != self.scene:
             self._world.close()
             self._world = BulletWorld(self.vehicle, scene, gui=self.render_mode == "human")

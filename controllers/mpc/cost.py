@@ -35,8 +35,9 @@ adds ``wall_suction`` (and whatever else a model file holds). No force formula i
 written here. The paper's Eq. 13 has no moment, and the inputs are body rates, so
 the model's moment is not used.
 
-Weights are ``1 / sigma^2`` with the authors' released standard deviations
-(``../shared/notes/reference-numbers.md``). The control-limit sigma is not in
+Weights are ``1 / sigma^2``; the defaults are the authors' released standard
+deviations (the ``paper`` preset, :mod:`controllers.presets`; the tuned presets
+replace them). The control-limit sigma is not in
 their notes; 0.01 (in the input's unit) is our choice, which makes a 0.1 N or
 0.1 rad/s violation cost as much as a 1.5 m position error at one stage. The
 thrust penalty starts ``thrust_margin`` = 1 N inside ``[5, 27] N`` as theirs does.
@@ -62,7 +63,7 @@ from wall_env.scene import Scene
 from wall_env.validation import check_range, check_vector
 from wall_env.vehicle import GRAVITY, VehicleParams
 
-__all__ = ["MPCWeights", "tuned_weights", "InputLimits", "MPCProblem", "RESIDUAL_SIZE", "STAGE_PARAM_SIZE"]
+__all__ = ["MPCWeights", "InputLimits", "MPCProblem", "RESIDUAL_SIZE", "STAGE_PARAM_SIZE"]
 
 RESIDUAL_SIZE = 29  # dynamics 9, reference 9, terminal 3, rate 4, limit 4
 STAGE_PARAM_SIZE = 17  # p_ref 3, v_ref 3, R_ref 9, terminal flag, rate flag
@@ -112,23 +113,6 @@ class MPCWeights:
             self.control_limit,
         ])
         return 1.0 / sigmas
-
-
-def tuned_weights() -> MPCWeights:
-    """The authors' sigmas with the position sigmas scaled by 0.467 (0.15 -> 0.07 m).
-
-    In this simulator, with the paper's command noise, the authors' weights leave the
-    lateral loop weak and lightly damped (about 6 N/m per kg, damping ratio about 0.05,
-    measured), less stiff than the suction's own gradient near the wall (2 k_s = 8.2 N/m
-    on the sweep), so both MPCs end up touching the wall. A sweep of the position sigma
-    (0.15, 0.10, 0.07, 0.05, 0.03 m) gave 13, 4, 0, 0, 0 SC-MPC contact steps on Table II;
-    0.07 m is the smallest change that removes them. Every other sigma, the horizon and the
-    limits stay the authors'. ``wall-inspector compare --weights tuned`` uses it.
-    """
-    scale = 0.07 / 0.15
-    defaults = MPCWeights()
-    return MPCWeights(position=tuple(scale * s for s in defaults.position),
-                      terminal_position=tuple(scale * s for s in defaults.terminal_position))
 
 
 @dataclass(frozen=True)
@@ -188,12 +172,17 @@ class MPCProblem:
                 self.horizon)
 
     # ------------------------------------------------------------------ numeric parameters
-    def global_params(self, mass: float | None = None) -> np.ndarray:
+    def global_params(self, mass: float | None = None, scene: Scene | None = None) -> np.ndarray:
+        """The global parameter vector; ``scene`` replaces the problem's walls (same structure)."""
+        scene = self.scene if scene is None else scene
+        if scene.structure != self.scene_structure:
+            raise ValueError(f"scene must have the structure the problem was built for, {self.scene_structure}, "
+                             f"got {scene.structure}")
         low, high = self.limits.bounds()
         return np.concatenate([
             [self.dt, self.vehicle.mass if mass is None else mass],
             self.weights.inverse_sigmas(), low, high,
-            self.model.theta(), self.scene.to_vector(),
+            self.model.theta(), scene.to_vector(),
         ])
 
     def stage_params(self, p_ref: np.ndarray, v_ref: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
