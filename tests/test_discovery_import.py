@@ -228,3 +228,20 @@ def test_vehicle_and_scene_files_are_checked_like_a_sidecar(tmp_path):
     scene.write_text("walls: []\nground_z: 0\nceiling_z: null\n")
     with pytest.raises(LogFormatError, match=r"key 'vehicle.mass'.*must be a finite number in \[0.001, 100\]"):
         read_vehicle_and_scene(vehicle, scene)
+
+
+def test_discover_takes_a_bag_directly(vehicle_and_scene, tmp_path, capsys):
+    bag = tmp_path / "bag"
+    _write_bag(bag)
+    vehicle, scene = vehicle_and_scene
+    code = main(["discover", str(bag), "--vehicle", str(vehicle), "--scene", str(scene), "--out", str(tmp_path / "r"),
+                 "--quiet", "--no-plots"])
+    assert code == 0, capsys.readouterr().err
+    report = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert report["details"]["logs"][0]["file"] == str(bag)
+    # 9.5 N of logged thrust holds 1.5 kg (14.7 N) at constant velocity: the thrust is 1.549 times what is logged
+    assert [e["name"] for e in report["effects"]] == ["thrust_scale"]
+    assert report["effects"][0]["params"]["scale"] == pytest.approx(1.5 * 9.81 / 9.5, rel=1e-3)
+    # at constant thrust that is indistinguishable from a steady vertical force, and the report says so
+    limits = {tuple(limit["effects"]): limit for limit in report["limits"]}
+    assert "climb and descend" in limits[("thrust_scale", "constant_force")]["manoeuvre"]
