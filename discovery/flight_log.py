@@ -29,13 +29,20 @@ segments that are processed separately.
 The JSON file::
 
     {"vehicle": {"mass": kg, "rotor_positions": [[x, y, z] x 4] (m, body frame),
-                 "drag": [dx, dy, dz] (N s/m, optional, zero if absent)},
+                 "drag": [dx, dy, dz] (N s/m, optional, zero if absent),
+                 "thrust_map": {"kind", "coefficient", "source"} (optional, see ThrustMap)},
      "scene": {"walls": [{"point": [x, y, z], "normal": [nx, ny, nz]}, ...],
                "ground_z": number or null, "ceiling_z": number or null},
      "gravity": 9.81}
 
 The vehicle block is the nominal model the user believes in; nothing in it says what
-is missing. ``gravity`` is optional (9.81 m/s^2 if absent); every other key shown is
+is missing. ``thrust_map`` records how an imported log's normalised commands became the
+thrust in newtons (:mod:`discovery.importers`); it is information, the CSV's thrust is
+already in newtons.
+
+The CSV is UTF-8 (a byte-order mark, as spreadsheets write, is dropped) with ``,``
+between fields; a header separated by ``;``, tabs or ``|`` is rejected with a message
+that names the separator. ``gravity`` is optional (9.81 m/s^2 if absent); every other key shown is
 required, and any other key is rejected.
 
 :func:`read_log` rejects a malformed log with a :class:`LogFormatError` whose message
