@@ -25,10 +25,12 @@ effect whose removal does not raise the score or that no longer explains a mater
 share next to the others, so nothing stays that does not pay for itself.
 
 The literature's fuller forms (:data:`VARIANTS`: wall suction scaled by rotor thrust,
-ground and ceiling effects with the distance offset, quadratic drag on the
-air-relative velocity with a fitted steady wind) are candidates of their own (keys
-such as ``quadratic_drag[wind]``), judged by the same score, at most one form per
-effect, and only when their extra parameters are determined.
+ground and ceiling effects with the distance offset) are candidates of their own
+(keys such as ``ground_effect[distance_offset]``), judged by the same score, at most
+one form per effect, and only when their extra parameters are determined. Quadratic
+drag on the air-relative velocity with a fitted steady wind (``quadratic_drag[wind]``)
+looks like a steady force plus drag, so it is tried after the selection in place of
+any chosen subset of :data:`WIND_REPLACES`, and kept where it scores better.
 
 Candidates the flight cannot tell apart are recorded (:attr:`Selection.alike`): a
 runner-up of the chosen step whose score is within one parameter price of the
@@ -56,8 +58,10 @@ VARIANTS: dict[str, list[dict]] = {
     "wall_suction": [{"thrust_scaling": True}],
     "ground_effect": [{"distance_offset": True}],
     "ceiling_effect": [{"distance_offset": True}],
-    "quadratic_drag": [{"wind": True}],
 }
+#: drag in a steady wind looks like a steady force plus drag, so it is tried after selection,
+#: in place of whatever of these the selection chose
+WIND_REPLACES = ("constant_force", "linear_drag", "quadratic_drag")
 
 
 def effective_samples(data: FlightData) -> float:
@@ -221,12 +225,46 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
         steps.append(Step(tried, best.names[-1], current.mse, best.mse))
         current = best
     current, removed = _backward(evaluator, current, material)
+    if "quadratic_drag" in base and variants is None:
+        current, evaluator = _drag_in_wind(data, r_nom, evaluator, current, base["quadratic_drag"], progress)
     explained = _sequential_explained(evaluator, current, nominal)
     explained = {effect_name(k): v for k, v in explained.items()}
     chosen_names = {effect_name(k) for k in current.names}
     alike = [a for a in alike if a["chosen"] in chosen_names]
     forms = [{"effect": effect_name(k), "form": k} for k in current.names]
     return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms)
+
+
+def _drag_in_wind(data: FlightData, r_nom: list[np.ndarray], evaluator: _Evaluator, current: Candidate,
+                  template: Effect, progress) -> tuple[Candidate, _Evaluator]:
+    """Quadratic drag on the air-relative velocity with a fitted wind, in place of any chosen subset of
+    :data:`WIND_REPLACES`, where it scores better and its wind is determined."""
+    replaceable = [k for k in current.names if k in WIND_REPLACES]
+    if not replaceable:
+        return current, evaluator
+    key = variant_key("quadratic_drag", {"wind": True})
+    templates = {**evaluator.templates, key: make_effect("quadratic_drag", **{**template.option_values, "wind": True})}
+    trial = _Evaluator(data, r_nom, templates, evaluator.n_eff)
+    trial.terms = evaluator.terms  # the plain effects' terms are shared; the wind form gets its own
+    best = current
+    for size in range(1, len(replaceable) + 1):
+        for dropped in _subsets(replaceable, size):
+            names = [k for k in current.names if k not in dropped] + [key]
+            if progress is not None:
+                progress(f"trying {' + '.join(names)}")
+            previous = {k: v for k, v in _params_by_name(current).items() if k in names}
+            if "quadratic_drag" in dropped:
+                previous[key] = np.concatenate([_params_by_name(current)["quadratic_drag"], np.zeros(3)])
+            cand = trial.evaluate(names, previous=previous)
+            if cand.score < best.score and _extra_determined(cand, key):
+                best = cand
+    return (best, trial) if best is not current else (current, evaluator)
+
+
+def _subsets(items: list[str], size: int) -> list[tuple[str, ...]]:
+    from itertools import combinations
+
+    return list(combinations(items, size))
 
 
 def _extra_determined(candidate: Candidate, key: str) -> bool:
