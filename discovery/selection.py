@@ -249,6 +249,8 @@ def _drag_in_wind(data: FlightData, r_nom: list[np.ndarray], evaluator: _Evaluat
     best = current
     for size in range(1, len(replaceable) + 1):
         for dropped in _subsets(replaceable, size):
+            if "quadratic_drag" in current.names and "quadratic_drag" not in dropped:
+                continue  # one form of an effect at a time
             names = [k for k in current.names if k not in dropped] + [key]
             if progress is not None:
                 progress(f"trying {' + '.join(names)}")
