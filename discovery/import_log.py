@@ -41,6 +41,10 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else Path(Path(args.log.rstrip("/")).stem + ".csv")
     problem = csv_output_problem(out, args.overwrite)
+    if problem is None and args.rate is not None and not 50.0 <= args.rate <= 1000.0:
+        problem = f"--rate must be in [50, 1000] Hz, got {args.rate:g}"
+    if problem is None and not Path(args.log).exists():
+        problem = f"flight log {args.log} does not exist"
     if problem:
         print(f"import-log: {problem}", file=sys.stderr)
         return 2
