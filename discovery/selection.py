@@ -19,8 +19,8 @@ the BIC's ``ln 3N`` on very long logs.
 
 Forward selection adds, one at a time, the candidate that lowers the score most (all
 parameters of the model refitted jointly, so two effects present together are both
-found) and that explains a material share (:data:`MIN_SHARE`) of the nominal model's
-held-out force-gap energy, and stops when none does. A backward pass then drops any
+found) and that explains a material share (:data:`MIN_SHARE`, 2 %) of the held-out
+force-gap energy the model leaves without it, and stops when none does. A backward pass then drops any
 effect whose removal does not raise the score or that no longer explains a material
 share next to the others, so nothing stays that does not pay for itself.
 
@@ -53,7 +53,7 @@ __all__ = ["ALPHA", "MIN_SHARE", "VARIANTS", "Candidate", "Step", "Selection", "
            "forward_selection", "fit_only"]
 
 ALPHA = 1e-4  # significance a parameter must reach on held-out data
-MIN_SHARE = 0.01  # share of the nominal held-out force-gap energy an effect must explain to stay
+MIN_SHARE = 0.02  # share of the held-out force-gap energy left without it that an effect must explain
 VARIANTS: dict[str, list[dict]] = {
     "wall_suction": [{"thrust_scaling": True}],
     "ground_effect": [{"distance_offset": True}],
@@ -191,7 +191,8 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     alike: list[dict] = []
 
     def material(better: Candidate, worse: Candidate) -> bool:
-        return nominal.mse > 0 and (worse.mse - better.mse) / nominal.mse >= MIN_SHARE
+        """``better`` explains at least MIN_SHARE of the force-gap energy that ``worse`` leaves."""
+        return worse.mse > 0 and (worse.mse - better.mse) / worse.mse >= MIN_SHARE
 
     while len(current.names) < max_effects:
         taken = {effect_name(k) for k in current.names}
