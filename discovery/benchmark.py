@@ -92,6 +92,10 @@ def _acceptance(args: argparse.Namespace) -> int:
             record["case"] = label
             records.append(record)
             index += 1
+            if record["ended_early"]:
+                print(f"{label:42s} {rate:6.0f} Hz  flight ended early after {record['duration_s']:.1f} s "
+                      f"({record['collisions']} collision(s)): not counted", flush=True)
+                continue
             errs = [e for e in record["param_errors"].values()]
             worst = "missing" if any(e is None for e in errs) else f"{100 * max(errs, default=0):.1f} %"
             print(f"{label:42s} {rate:6.0f} Hz  found {','.join(record['named']) or '-':40s} "
@@ -103,10 +107,15 @@ def _acceptance(args: argparse.Namespace) -> int:
             record["case"] = f"clean {scenario}"
             records.append(record)
             index += 1
+            if record["ended_early"]:
+                print(f"{record['case']:42s} flight ended early: not counted", flush=True)
+                continue
             print(f"{record['case']:42s} {record['rate_hz']:6.0f} Hz  found {','.join(record['named']) or '-':40s} "
                   f"{'ok ' if record['named_right'] else 'BAD'}", flush=True)
-    hidden = [r for r in records if r["flown"]]
-    clean = [r for r in records if not r["flown"]]
+    ended = [r for r in records if r["ended_early"]]
+    records_flown = [r for r in records if not r["ended_early"]]
+    hidden = [r for r in records_flown if r["flown"]]
+    clean = [r for r in records_flown if not r["flown"]]
     right = [r for r in hidden if r["named_right"]]
     param_errors = [e for r in right for e in r["param_errors"].values() if e is not None]
     within = [r for r in right if all(e is not None and e <= 0.10 for e in r["param_errors"].values())]
@@ -124,7 +133,7 @@ def _acceptance(args: argparse.Namespace) -> int:
         "logs_with_gap_reduction_80_percent": sum(g >= 0.8 for g in gaps),
         "clean_logs": len(clean),
         "clean_logs_nothing_named": sum(not r["named"] for r in clean),
-        "seeds": seeds, "duration_s": duration,
+        "flights_ended_early": len(ended), "seeds": seeds, "duration_s": duration,
     }
     print(f"named right with nothing spurious: {len(right)}/{len(hidden)} "
           f"({100 * summary['named_right_share']:.0f} %, target >= 95 %); fuller form right in "
@@ -134,6 +143,8 @@ def _acceptance(args: argparse.Namespace) -> int:
     print(f"held-out force gap reduced by >= 80 %: {summary['logs_with_gap_reduction_80_percent']}/{len(hidden)}; "
           f"worst reduction {100 * summary['worst_force_gap_reduction']:.0f} %")
     print(f"clean logs with nothing named: {summary['clean_logs_nothing_named']}/{len(clean)}")
+    if ended:
+        print(f"flights that ended early (collision) and were not counted: {len(ended)}")
     if args.json:
         Path(args.json).write_text(json.dumps({"summary": summary, "logs": records}, indent=2, default=str))
         print(f"wrote {args.json}")
