@@ -25,9 +25,9 @@ effect whose removal does not raise the score or that no longer explains a mater
 share next to the others, so nothing stays that does not pay for itself.
 
 The literature's fuller forms (:data:`VARIANTS`: wall suction scaled by rotor thrust,
-ground and ceiling effects with the distance offset) then replace a chosen effect
-(as keys such as ``ground_effect[distance_offset]``) where the same score prefers
-them and their extra parameters are determined. Quadratic
+ground and ceiling effects with the distance offset) are candidates of their own
+(keys such as ``ground_effect[distance_offset]``), judged by the same score, at most
+one form per effect, and only when their extra parameters are determined. Quadratic
 drag on the air-relative velocity with a fitted steady wind (``quadratic_drag[wind]``)
 looks like a steady force plus drag, so it is tried after the selection in place of
 any chosen subset of :data:`WIND_REPLACES`, and kept where it scores better.
@@ -181,7 +181,7 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
                       progress=None, variants: dict[str, list[dict]] | None = None) -> Selection:
     """Greedy forward selection over the candidates and their fuller forms, then a backward check."""
     base = {e.name: e for e in candidates if applicable(e, data)}
-    templates = dict(base)
+    templates = _with_variants(base, VARIANTS if variants is None else variants)
     n_eff = effective_samples(data)
     price = parameter_price(n_eff)
     evaluator = _Evaluator(data, r_nom, templates, n_eff)
@@ -226,8 +226,6 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
         steps.append(Step(tried, best.names[-1], current.mse, best.mse))
         current = best
     current, removed = _backward(evaluator, current, material)
-    current, evaluator = _fuller_forms(data, r_nom, evaluator, current, VARIANTS if variants is None else variants,
-                                       progress)
     if "quadratic_drag" in base and variants is None:
         current, evaluator = _drag_in_wind(data, r_nom, evaluator, current, base["quadratic_drag"], progress)
     explained = _sequential_explained(evaluator, current, nominal)
@@ -236,28 +234,6 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     alike = [a for a in alike if a["chosen"] in chosen_names]
     forms = [{"effect": effect_name(k), "form": k} for k in current.names]
     return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms)
-
-
-def _fuller_forms(data: FlightData, r_nom: list[np.ndarray], evaluator: _Evaluator, current: Candidate,
-                  variants: dict[str, list[dict]], progress) -> tuple[Candidate, _Evaluator]:
-    """Each chosen effect in its fuller forms, kept where the score prefers it and its extra parameters
-    are determined."""
-    for name in list(current.names):
-        extended = _with_variants({name: evaluator.templates[name]}, variants)
-        for key, variant in extended.items():
-            if key == name:
-                continue
-            trial = _Evaluator(data, r_nom, {**evaluator.templates, key: variant}, evaluator.n_eff)
-            trial.terms = evaluator.terms
-            names = [key if n == name else n for n in current.names]
-            if progress is not None:
-                progress(f"trying {' + '.join(names)}")
-            previous = {k: v for k, v in _params_by_name(current).items() if k != name}
-            cand = trial.evaluate(names, previous=previous)
-            if cand.score < current.score and _extra_determined(cand, key):
-                current, evaluator = cand, trial
-                break
-    return current, evaluator
 
 
 def _drag_in_wind(data: FlightData, r_nom: list[np.ndarray], evaluator: _Evaluator, current: Candidate,
