@@ -83,7 +83,7 @@ TABLE_I = tuple(Scenario("I", "WallInspector/WallCircle-v0", k_s, 0.10, TABLE_I_
 TABLE_II = (Scenario("II", "WallInspector/WallSweep-v0", 4.1, 0.132, TABLE_II_SEEDS),)
 
 # The paper's figures (cm) for the README and the printed comparison.
-PAPER_VALUES = {
+PAPER_VALUES: dict[str, dict[Any, Any]] = {
     "I": {  # wall-normal (their Y) MAE / RMSE, simulation
         ("PID", 10.0): (4.1, 5.4), ("MPC", 1.0): (0.27, 0.47), ("MPC", 4.0): (0.88, 0.98),
         ("MPC", 10.0): (2.9, 3.0), ("SC-MPC", 10.0): (0.32, 0.39),
@@ -293,12 +293,12 @@ def acceptance(results: Sequence[ScenarioResult], table_i_paper_match: bool = Fa
                                         f"of the paper's {paper_rmse:g} cm (ratio)", "value": ratio,
                                "pass": 1 / PAPER_MATCH_FACTOR <= ratio <= PAPER_MATCH_FACTOR})
         k_values = sorted({r.scenario.k_s for r in results if r.scenario.table == "I"})
-        pairs = [(find("I", "SC-MPC", k), find("I", "MPC", k)) for k in k_values]
+        pairs: list[tuple[Any, Any]] = [(find("I", "SC-MPC", k), find("I", "MPC", k)) for k in k_values]
         if pairs and all(a is not None and b is not None for a, b in pairs):
             worst = max(a["wall_normal_rmse"] / b["wall_normal_rmse"] for a, b in pairs)
             checks.append({"check": "Table I: SC-MPC below MPC at every k_s (largest SC-MPC / MPC)", "value": worst,
                            "pass": worst < 1.0})
-        mpc_rmse = [find("I", "MPC", k) for k in k_values]
+        mpc_rmse: list[Any] = [find("I", "MPC", k) for k in k_values]
         if len(mpc_rmse) > 1 and all(m is not None for m in mpc_rmse):
             growth = min(b["wall_normal_rmse"] / a["wall_normal_rmse"] for a, b in zip(mpc_rmse, mpc_rmse[1:]))
             checks.append({"check": "Table I: MPC's RMSE grows with k_s (smallest step ratio)", "value": growth,

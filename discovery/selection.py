@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
@@ -199,8 +200,8 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
         remaining = [k for k in templates if effect_name(k) not in taken]
         if not remaining:
             break
-        tried = []
-        scored = []
+        tried: list[dict[str, Any]] = []
+        scored: list[Candidate] = []
         for key in remaining:
             if progress is not None:
                 progress(f"trying {' + '.join(current.names + [key])}")

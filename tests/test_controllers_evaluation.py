@@ -141,7 +141,7 @@ def test_runner_tables_json_and_figures(tmp_path):
     assert len(data["runs"]) == 10 and len(data["runs"][0]["per_episode"]) == 1
 
 
-def test_paper_scenarios_are_the_issue_s():
+def test_paper_scenarios_are_the_papers():
     assert [(s.env_id, s.k_s, s.d_thr, len(s.seeds), s.env_kwargs) for s in pt.TABLE_I] == [
         ("WallInspector/WallCircle-v0", k, 0.10, 5, {"standoff": 0.15}) for k in (1.0, 4.0, 10.0)]
     # where Table I puts the vehicle: near rotors 2.07 cm inside d_thr, ducts 3.93 cm off the wall

@@ -92,7 +92,8 @@ def test_seed_lists_and_the_search_space():
 
 
 def test_the_flight_cost_prices_contacts_and_effort():
-    metrics = {"wall_normal_rmse": 0.004, "rmse_norm": 0.01, "collisions": 20, "body_rate_effort_rms": 0.1,
+    metrics = {"wall_normal_rmse": 0.004, "rmse_norm": 0.005, "collisions": 20, "body_rate_effort_rms": 0.1,
                "thrust_effort_rms": 0.5}
-    assert flight_cost(metrics) == pytest.approx(0.4 + 0.05 * 20 + 1.0 * 0.1 + 0.2 * 0.5)
-    assert flight_cost({**metrics, "wall_normal_rmse": float("nan")}) == pytest.approx(1.0 + 1.0 + 0.1 + 0.1)
+    # 0.3 cm RMS along the wall (a 3-4-5 triangle with the 0.4 cm wall-normal error) at a fifth
+    assert flight_cost(metrics) == pytest.approx(0.4 + 0.2 * 0.3 + 0.05 * 20 + 1.0 * 0.1 + 0.2 * 0.5)
+    assert flight_cost({**metrics, "wall_normal_rmse": float("nan")}) == pytest.approx(0.5 + 1.0 + 0.1 + 0.1)

@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -174,10 +173,6 @@ def budget_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _error(message: str) -> int:
-    print(f"wall-inspector compare: error: {message}", file=sys.stderr)
-    return 2
-
 
 def run(args: argparse.Namespace) -> int:
     from controllers import paper_tables as pt
@@ -205,7 +200,7 @@ def run(args: argparse.Namespace) -> int:
         if out.exists() and not out.is_dir():
             raise UsageError(f"--out {out} exists and is not a folder")
     except UsageError as exc:
-        return _error(str(exc))
+        raise SystemExit(str(exc)) from None  # one line, exit status 2 (wall_inspector.cli)
 
     mpc_weights = (lambda w: dataclasses.replace(w, **changes)) if changes else None
     policies = pt.controller_policies(args.weights, mpc_weights=mpc_weights)

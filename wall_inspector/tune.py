@@ -90,18 +90,13 @@ def _env_kwargs(items: list[str]) -> dict:
     return out
 
 
-def _error(message: str) -> int:
-    print(f"wall-inspector tune: error: {message}", file=sys.stderr)
-    return 2
-
 
 def run(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
     import wall_env  # noqa: F401  (registers the environments)
-    from controllers.presets import PRESET_DIR, tuned_preset_path
+    from controllers.presets import PRESET_DIR, load_preset, tuned_preset_path
     from controllers.tuning import SearchSpace, Tuner, default_objective
-    from controllers.presets import load_preset
     from wall_env.tasks import task_env_id, task_slug
 
     # ---------------------------------------------------------- every argument checked before any work
@@ -136,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out} exists and is not a folder")
     except (ValueError, TypeError) as exc:
-        return _error(str(exc))
+        raise SystemExit(str(exc)) from None  # one line, exit status 2 (wall_inspector.cli)
 
     command = "wall-inspector tune " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 1 \
         and sys.argv[1] == "tune" else f"wall-inspector tune --env {env_id} --method {method}"

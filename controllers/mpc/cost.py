@@ -51,14 +51,15 @@ functions, so changing them never regenerates code; only the model's structure
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from controllers.mpc.manifold import POINT_SIZE, unpack_point
-from wall_env.rotations import so3_log
 from wall_env.aero import AeroModel, symbolic_scene
 from wall_env.effects import FlightContext
+from wall_env.rotations import so3_log
 from wall_env.scene import Scene
 from wall_env.validation import check_range, check_vector
 from wall_env.vehicle import GRAVITY, VehicleParams
@@ -98,8 +99,8 @@ class MPCWeights:
         sizes = {"position": 3, "rotation": 3, "velocity": 3, "terminal_position": 3, "dynamics": 9,
                  "control_rate": 4, "control_limit": 4}
         for name, size in sizes.items():
-            value = getattr(self, name)
-            if np.isscalar(value):
+            value: Any = getattr(self, name)
+            if isinstance(value, (int, float, np.floating, np.integer)):
                 value = (float(value),) * size
             object.__setattr__(self, name, check_vector(f"weights.{name}", value, size, low=1e-9, high=1e9))
 

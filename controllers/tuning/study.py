@@ -28,6 +28,7 @@ from typing import Any
 
 from controllers.presets import METHOD_LABELS, ControllerPreset, load_preset
 from controllers.tuning.objective import (
+    ALONG_WALL_PRICE,
     CONTACT_PRICE_CM,
     RATE_EFFORT_PRICE_CM,
     THRUST_EFFORT_PRICE_CM,
@@ -146,6 +147,7 @@ class Tuner:
         recorded = study.user_attrs.get("signature")
         if recorded is None:
             study.set_user_attr("signature", signature)
+            study.set_user_attr("commit", git_commit())  # the code the study runs (a resume may run later code)
         elif recorded != signature:
             raise ValueError(f"{self.run_dir} holds a study of {recorded}, not of {signature}; "
                              "use another --out folder")
@@ -245,7 +247,7 @@ class Tuner:
             "sampler": f"optuna TPESampler(seed={self.seed}), MedianPruner(n_startup_trials=8)",
             "start": [{"preset": p.name, "settings": p.methods[self.space.method]} for p in [self.base, *self.start]],
             "command": self.command,
-            "commit": git_commit(),
+            "commit": study.user_attrs.get("commit") or git_commit(),
             "date": time.strftime("%Y-%m-%d", time.gmtime()),
         }
         name = "paper-sim" if self.objective.name == "paper-table-i" else \
@@ -267,7 +269,8 @@ class Tuner:
         if self.objective.name == "paper-table-i":
             return ("over Table I's MPC (k_s 1, 4, 10 N/m) and SC-MPC (k_s 10 N/m) cells: max |ln(wall-normal RMSE "
                     "/ paper RMSE)| + 0.1 mean ln(wall-normal RMSE / paper RMSE)^2")
-        return (f"mean over flights of wall-normal RMSE (cm) + {CONTACT_PRICE_CM} cm per contact step + "
+        return (f"mean over flights of wall-normal RMSE (cm) + {ALONG_WALL_PRICE} x RMSE along the wall (cm) + "
+                f"{CONTACT_PRICE_CM} cm per contact step + "
                 f"{RATE_EFFORT_PRICE_CM} cm per rad/s RMS body-rate command + {THRUST_EFFORT_PRICE_CM} cm per N "
                 "RMS thrust command away from hover")
 
