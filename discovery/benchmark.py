@@ -96,7 +96,7 @@ def _acceptance(args: argparse.Namespace) -> int:
                 print(f"{label:42s} {rate:6.0f} Hz  flight ended early after {record['duration_s']:.1f} s "
                       f"({record['collisions']} collision(s)): not counted", flush=True)
                 continue
-            errs = [e for e in record["param_errors"].values()]
+            errs = list(record["param_errors"].values())
             worst = "missing" if any(e is None for e in errs) else f"{100 * max(errs, default=0):.1f} %"
             print(f"{label:42s} {rate:6.0f} Hz  found {','.join(record['named']) or '-':40s} "
                   f"{'ok ' if record['named_right'] else 'BAD'} worst param {worst:>8s}  gap "

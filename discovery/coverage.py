@@ -61,7 +61,8 @@ def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
                     "manoeuvre": "add the wall to the scene (sidecar or --scene) and fly within "
                                  f"{NEAR_SURFACE:g} m of it"})
     else:
-        nearest = min(closest(n) for n in walls)
+        distances = [d for d in (closest(n) for n in walls) if d is not None]
+        nearest = min(distances) if distances else float("inf")
         if nearest > NEAR_SURFACE:
             out.append({"effects": ["wall_suction"],
                         "reason": f"the rotors never came closer than {nearest:.2f} m to a wall",
@@ -114,10 +115,10 @@ def scene_problems(regressors: list, times: np.ndarray) -> list[str]:
         if reg.name.startswith("nearest rotor distance to wall"):
             k = reg.name.rsplit(" ", 1)[-1]
             most = float(np.mean(v[np.isfinite(v)] < 0))
-            fix = ("its normal points into the wall: flip the sign of scene.walls[%s].normal (normals point away "
-                   "from the wall, into free space)" % k if most > 0.5 else
-                   "move scene.walls[%s].point at least %.2f m back along the normal, or check the log's frame"
-                   % (k, -deepest))
+            fix = (f"its normal points into the wall: flip the sign of scene.walls[{k}].normal (normals point away "
+                   "from the wall, into free space)" if most > 0.5 else
+                   f"move scene.walls[{k}].point at least {-deepest:.2f} m back along the normal, or check the "
+                   "log's frame")
             out.append(f"likely sidecar error: the rotors are behind wall {k} (down to {deepest:.2f} m) for "
                        f"{seconds:.1f} s, which a vehicle cannot be; {fix}")
         elif reg.name == "height above ground":

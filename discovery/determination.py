@@ -44,9 +44,9 @@ class Undetermined(dict):
 
 
 def _manoeuvre(effect: str, name: str, index: int | None) -> str:
-    if name in ("D", "C"):
+    if name in ("D", "C") and index is not None:
         return f"fly back and forth along body {_AXES[index]} at 1 m/s or more"
-    if name == "w":
+    if name == "w" and index is not None:
         return f"fly back and forth along world {_AXES[index]} at 1 m/s or more, at several speeds"
     return MANOEUVRES.get((effect, name), "fly where this effect acts, over a wider range")
 
@@ -101,7 +101,7 @@ def restrict(effects: list[Effect], cases: list[Undetermined]) -> list[Effect]:
             if c["index"] is None:
                 values[c["name"]] = null
             else:
-                entries = list(values[c["name"]])
+                entries = list(np.atleast_1d(np.asarray(values[c["name"]], dtype=float)))
                 entries[c["index"]] = null
                 values[c["name"]] = entries
         if mine and len(mine) >= sum(p.size for p in effect.parameters if p.name in NULL_VALUES):

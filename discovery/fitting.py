@@ -168,7 +168,7 @@ class EffectFit:
     """
 
     def __init__(self, data: FlightData, effects: list[Effect], nominal_residual: list[np.ndarray],
-                 terms: dict[str, _Term] | None = None):
+                 terms: dict[Any, _Term] | None = None):
         self.data = data
         self.templates = list(effects)
         self.rows = [seg.fit_rows for seg in data.segments]
@@ -177,7 +177,7 @@ class EffectFit:
         cache = terms if terms is not None else {}
         self.terms = []
         for effect in effects:
-            key = (effect.name, tuple(sorted(effect.option_values.items())))  # forms of one effect differ
+            key: Any = (effect.name, tuple(sorted(effect.option_values.items())))  # forms of one effect differ
             if key not in cache:
                 cache[key] = _Term(data, effect)
             self.terms.append(cache[key])

@@ -46,6 +46,7 @@ def _suction_survey(k_s: float, d_thr: float) -> dict[str, Any]:
 
 def draw(form: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str, Any]]:
     """``({"name", "params"}, fly keywords)`` for one form of :data:`FORMS`."""
+    params: dict[str, Any]
     if form.startswith("wall_suction"):
         k_s, d_thr = rng.uniform(3.5, 8.0), rng.uniform(0.11, 0.15)
         params = {"k_s": k_s, "d_thr": d_thr}
@@ -76,7 +77,7 @@ def draw(form: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str,
     if form == "linear_drag":
         return {"name": form, "params": {"D": list(rng.uniform(0.1, 0.4, 3))}}, {"scenario": "survey"}
     if form.startswith("quadratic_drag"):
-        params: dict[str, Any] = {"C": list(rng.uniform(0.05, 0.15, 3))}
+        params = {"C": list(rng.uniform(0.05, 0.15, 3))}
         if form == "quadratic_drag_wind":
             heading = rng.uniform(0, 2 * math.pi)
             speed = rng.uniform(1.0, 3.0)
@@ -119,7 +120,7 @@ def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int,
     runtime = time.perf_counter() - started
     flown = sorted(e["name"] for e in effects)
     named = sorted(found.names_)
-    errors = {}
+    errors: dict[str, float | None] = {}
     for e in effects:
         fitted = next((f for f in found.effects_ if f.name == e["name"]), None)
         for key, true in e["params"].items():

@@ -41,14 +41,14 @@ from typing import Any
 
 import numpy as np
 
-from discovery.determination import determined, restrict
 from discovery.coverage import REST_THRUST_SHARE, flight_limits, resting_on_ground, scene_problems
+from discovery.determination import determined, restrict
 from discovery.fitting import out_of_fold_residuals
 from discovery.flight_log import FlightLog
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, prepare
-from discovery.selection import fit_only, forward_selection
+from discovery.selection import Selection, fit_only, forward_selection
 from wall_env.aero import AeroModel
 from wall_env.effects import EFFECTS, Effect, make_effect
 from wall_env.model_file import FlightModel
@@ -165,7 +165,7 @@ class Discovery:
         self._say("preparing residuals")
         try:
             data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
-        except ValueError as exc:
+        except ValueError:
             if airborne:
                 raise
             return self._nothing_to_fit(f"no airborne stretch of at least {shortest:.3g} s: nothing to fit",
@@ -190,13 +190,13 @@ class Discovery:
         else:
             templates = [self._template(n) for n in self.candidates]
             selection = forward_selection(data, r_nom, templates, self.max_effects, progress=self._say)
-        self.selection_ = selection
+        self.selection_: Selection | None = selection
         chosen = selection.chosen
         # only what the flight determined goes into the model (discovery.determination)
         self.effects_, self.param_std_, self.undetermined_ = determined(list(chosen.fit.effects),
                                                                         chosen.fit.std_dicts())
-        kept = {e.name for e in self.effects_}
-        self.explained_fraction_ = {k: v for k, v in selection.explained.items() if k in kept}
+        kept_names = {e.name for e in self.effects_}
+        self.explained_fraction_ = {k: v for k, v in selection.explained.items() if k in kept_names}
         fold_theta = [self._restricted_theta(chosen.fit.effects, theta_k) for theta_k in chosen.fit.fold_theta]
 
         # 4: the fix

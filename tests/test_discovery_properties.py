@@ -32,7 +32,7 @@ SIDECAR = {"vehicle": {"mass": 1.0, "rotor_positions": _ROTORS, "drag": [0.3, 0.
 def _base_table() -> list[list[str]]:
     rows = []
     for k in range(N_ROWS):
-        values = {c: 0.0 for c in REQUIRED_COLUMNS}
+        values = dict.fromkeys(REQUIRED_COLUMNS, 0.0)
         values.update(t=0.01 * k, x=0.5, z=1.0, qw=1.0, thrust_cmd=9.81)
         rows.append([repr(values[c]) for c in REQUIRED_COLUMNS])
     return rows

@@ -41,7 +41,12 @@ import numpy as np
 from discovery.flight_log import FlightLog, LogFormatError, NominalVehicle, ThrustMap
 from discovery.importers.frames import attitude_frd_ned_to_flu_enu, frd_to_flu, ned_to_enu
 from discovery.importers.resample import (
-    Signal, common_clock, hold, interpolate, interpolate_attitude, valid_mask,
+    Signal,
+    common_clock,
+    hold,
+    interpolate,
+    interpolate_attitude,
+    valid_mask,
 )
 from discovery.importers.thrust_map import apply_thrust_map, fit_thrust_map
 from wall_env.scene import Scene
@@ -62,7 +67,7 @@ class _Topics:
             raise ImportError("reading PX4 logs needs pyulog (pip install pyulog)") from None
         try:
             self.ulog = ULog(str(path))
-        except Exception as exc:  # pyulog raises bare exceptions on damaged files
+        except Exception as exc:  # noqa: BLE001 - pyulog raises assorted errors on damaged files
             raise LogFormatError(f"{path}: not a readable PX4 ULog file ({type(exc).__name__}: {exc})") from None
         self.path = path
         self.start = self.ulog.start_timestamp
@@ -175,7 +180,7 @@ def read_ulog(path: str | Path, vehicle: NominalVehicle, scene: Scene, gravity: 
     thrust_map, map_note = _thrust_map(topics, vehicle, gravity, t, p_world, v_world, R, u_collective, u_motors,
                                        thrust_map_kind)
     rotor_thrusts = None
-    if thrust_map.kind == "collective":
+    if thrust_map.kind == "collective" or u_motors is None:
         thrust = apply_thrust_map(thrust_map, u_collective)
     else:
         rotor_thrusts = apply_thrust_map(thrust_map, u_motors)
@@ -212,7 +217,7 @@ def _thrust_map(topics: _Topics, vehicle: NominalVehicle, gravity: float, t: np.
     kind = kind or ("motor_command" if u_motors is not None else "collective")
     if kind != "collective" and u_motors is None:
         raise LogFormatError(f"{topics.path}: thrust map kind {kind!r} needs motor commands; the log has none")
-    command = u_collective if kind == "collective" else u_motors
+    command = u_collective if kind == "collective" or u_motors is None else u_motors
     airborne = None
     if topics.has("vehicle_land_detected", "landed"):
         landed = topics.signal("landed", "vehicle_land_detected", ["landed"])

@@ -29,7 +29,12 @@ import numpy as np
 from discovery.flight_log import FlightLog, LogFormatError, NominalVehicle, ThrustMap, quaternions_to_matrices
 from discovery.importers.frames import attitude_frd_ned_to_flu_enu, frd_to_flu, ned_to_enu
 from discovery.importers.resample import (
-    Signal, common_clock, hold, interpolate, interpolate_attitude, valid_mask,
+    Signal,
+    common_clock,
+    hold,
+    interpolate,
+    interpolate_attitude,
+    valid_mask,
 )
 from discovery.importers.thrust_map import apply_thrust_map, fit_thrust_map
 
@@ -143,7 +148,7 @@ def _collect(path: Path, topic_map: dict[str, Any]) -> dict[str, tuple[np.ndarra
                     values.append(rows)
     except LogFormatError:
         raise
-    except Exception as exc:  # rosbags raises its own errors for damaged or unknown bags
+    except Exception as exc:  # noqa: BLE001 - rosbags raises assorted errors for damaged or unknown bags
         raise LogFormatError(f"{path}: not a readable ROS 2 bag ({type(exc).__name__}: {exc})") from None
     return {k: (np.asarray(t), v, m) for k, (t, v, m) in found.items()}
 
@@ -250,5 +255,5 @@ def read_bag(path: str | Path, vehicle: NominalVehicle, scene: Any, gravity: flo
             "NED world / FRD body converted to ENU world / FLU body",
             "signals": {k: topics[k] for k in TOPIC_KEYS if k in topics},
             "signal_rates_hz": {s.name: round(s.rate_hz, 2) for s in states + commands},
-            "thrust_map": {**vehicle.thrust_map.to_dict(), "note": note}}
+            "thrust_map": {**vehicle.thrust_map.to_dict(), "note": note} if vehicle.thrust_map else None}
     return log, info

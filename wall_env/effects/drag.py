@@ -18,7 +18,6 @@ import casadi as ca
 
 from wall_env.effects.base import Effect, FlightContext, Parameter, Wrench
 
-
 WIND = Parameter("w", "m/s", (0.0, 0.0, 0.0), -30.0, 30.0, "steady wind velocity along world x, y, z")
 
 
