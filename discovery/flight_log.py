@@ -447,7 +447,8 @@ class _Sidecar:
         return ""
 
     def fail(self, key: str, message: str) -> LogFormatError:
-        return LogFormatError(f"{self.path}: key '{key}'{self._line_of(key)}: {message}")
+        shown = key if key.isprintable() else repr(key)[1:-1]  # a key with a line break stays on one line
+        return LogFormatError(f"{self.path}: key '{shown}'{self._line_of(key)}: {message}")
 
     def mapping(self, key: str, value: Any, schema: dict[str, bool]) -> dict[str, Any]:
         if not isinstance(value, dict):
