@@ -27,7 +27,8 @@ share next to the others, so nothing stays that does not pay for itself.
 The literature's fuller forms (:data:`VARIANTS`: wall suction scaled by rotor thrust,
 ground and ceiling effects with the distance offset) are candidates of their own
 (keys such as ``ground_effect[distance_offset]``), judged by the same score, at most
-one form per effect, and only when their extra parameters are determined. Quadratic
+one form per effect, tried in a round only where the plain form improves the model,
+and kept only when their extra parameters are determined. Quadratic
 drag on the air-relative velocity with a fitted steady wind (``quadratic_drag[wind]``)
 looks like a steady force plus drag, so it is tried after the selection in place of
 any chosen subset of :data:`WIND_REPLACES`, and kept where it scores better.
@@ -202,7 +203,10 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
             break
         tried: list[dict[str, Any]] = []
         scored: list[Candidate] = []
+        helpful = set()  # plain forms that improve on the current model this round
         for key in remaining:
+            if "[" in key and effect_name(key) not in helpful:
+                continue  # a fuller form is worth fitting only where its plain form already helps
             if progress is not None:
                 progress(f"trying {' + '.join(current.names + [key])}")
             cand = evaluator.evaluate(current.names + [key], previous=_params_by_name(current))
@@ -210,6 +214,8 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
             usable = cand.score < current.score and material(cand, current) and _extra_determined(cand, key)
             tried.append({"name": key, "cv_mse_N2": cand.mse, "gain": gain, "score": cand.score,
                           "material": material(cand, current), "params": cand.fit.effects[-1].params_dict()})
+            if cand.score < current.score:
+                helpful.add(effect_name(key))
             if usable:
                 scored.append(cand)
         tried.sort(key=lambda r: r["score"])
