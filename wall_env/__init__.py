@@ -8,8 +8,12 @@
     env = gym.make("WallInspector/WallSweep-v0", k_s=4.1, d_thr=0.132)
     envs = gym.make_vec("WallInspector/WallSweep-v0", num_envs=1024, vectorization_mode="vector_entry_point")
 
-Each id is registered with ``max_episode_steps`` (the task's default duration at 100 Hz)
-and a ``vector_entry_point`` (:class:`~wall_env.vector_env.WallInspectorVectorEnv`).
+Each id is registered with a ``vector_entry_point``
+(:class:`~wall_env.vector_env.WallInspectorVectorEnv`) and ``max_episode_steps`` =
+:data:`~wall_env.config.MAX_EPISODE_STEPS`, the longest episode any settings allow. The
+env itself ends each episode at its reference's end (``duration``, a keyword), so a
+registered limit of the default length would cut short every flight given a longer
+``duration``; stepping on after the end raises a ``RuntimeError`` that says to reset.
 """
 
 from gymnasium.envs.registration import register, registry
@@ -17,7 +21,7 @@ from gymnasium.envs.registration import register, registry
 from wall_env.actions import ActionMapping
 from wall_env.aero import AeroModel
 from wall_env.effects import EFFECTS, Effect, effects_from_spec, make_effect
-from wall_env.config import EnvConfig
+from wall_env.config import MAX_EPISODE_STEPS, EnvConfig
 from wall_env.env import DEFAULT_REWARD_WEIGHTS, WallInspectorEnv
 from wall_env.model_file import FlightModel, nominal_aero_model
 from wall_env.observation import OBSERVATION_FIELDS, parse_observation
@@ -57,7 +61,7 @@ for _name in TASKS:
     if _id not in registry:
         register(id=_id, entry_point="wall_env.env:WallInspectorEnv",
                  vector_entry_point="wall_env.vector_env:WallInspectorVectorEnv", kwargs={"task": _name},
-                 max_episode_steps=int(round(TASKS[_name].duration / 0.01)))
+                 max_episode_steps=MAX_EPISODE_STEPS)
 
 
 def __getattr__(name: str):

@@ -21,12 +21,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from wall_env.config import EnvConfig
 from wall_env.contact import SURFACES
 from wall_env.dynamics import STATE_SIZE, BatchSimulator, StateIndex
 from wall_env.observation import CLEARANCE_CAP, OBSERVATION_FIELDS, OBSERVATION_SIZE, PREVIEW_STEPS
+from wall_env.rotations import euler_xyz_to_quat_rows, quat_to_rotation_rows
 from wall_env.streams import RandomStreams
 from wall_env.vehicle import GRAVITY
 
@@ -110,27 +110,33 @@ class EnvBatch:
         self.episode_parameters = {key: np.zeros(n) for key in cfg.randomize}
 
     # ------------------------------------------------------------------ reset
-    def reset(self, rows: np.ndarray, spread: np.ndarray | float = 1.0) -> None:
-        """Start new episodes in ``rows`` (start perturbation scaled by ``spread``, 0 or 1)."""
+    def reset(self, rows: np.ndarray | slice, spread: np.ndarray | float = 1.0) -> None:
+        """Start new episodes in ``rows`` (indices, or ``slice(None)`` for all; start perturbation
+        scaled by ``spread``, 0 or 1)."""
         cfg, sim = self.config, self.simulator
         task = cfg.task
         ranges = cfg.randomize
         u = self.streams.uniform(rows, len(ranges) + 9)
+        k = u.shape[0]
         sample = {}
         for j, (key, (low, high)) in enumerate(ranges.items()):
             sample[key] = low + (high - low) * u[:, j]
             self.episode_parameters[key][rows] = sample[key]
-        theta = np.broadcast_to(self._theta0, (len(rows), self._theta0.size)).copy()
-        for name, column in self._suction_columns.items():
-            if name in sample:
-                theta[:, column] = sample[name]
-        sim.theta[rows] = theta
-        mass = sample.get("mass", np.full(len(rows), cfg.vehicle.mass))
-        sim.mass[rows, 0] = mass
         geometry = cfg.geometry
-        shift = sample.get("standoff", np.full(len(rows), geometry.standoff)) - geometry.standoff
-        sim.scene[rows] = geometry.scene_vector + shift[:, None] * geometry.scene_rate
-        offset = shift[:, None] * geometry.p_rate
+        if ranges:
+            theta = np.broadcast_to(self._theta0, (k, self._theta0.size)).copy()
+            for name, column in self._suction_columns.items():
+                if name in sample:
+                    theta[:, column] = sample[name]
+            sim.theta[rows] = theta
+        mass = sample.get("mass", cfg.vehicle.mass)
+        sim.mass[rows, 0] = mass
+        if "standoff" in sample:
+            shift = sample["standoff"] - geometry.standoff
+            sim.scene[rows] = geometry.scene_vector + shift[:, None] * geometry.scene_rate
+            offset = shift[:, None] * geometry.p_rate
+        else:
+            offset = np.zeros((1, 3))
         self.ref_offset[rows] = offset
 
         spread = np.reshape(np.asarray(spread, dtype=float), (-1, 1))
@@ -139,22 +145,22 @@ class EnvBatch:
         v0 = self._ref_v[0] + perturb[:, 3:6] * task.start_velocity_noise
         tilt = perturb[:, 6:9] * task.start_attitude_noise
         tilt[:, 2] += self._yaw
-        attitude = Rotation.from_euler("xyz", tilt)
-        x = np.zeros((len(rows), STATE_SIZE))
+        q = euler_xyz_to_quat_rows(tilt)
+        x = np.empty((k, STATE_SIZE))
         x[:, StateIndex.p_world] = p0
-        x[:, StateIndex.q_body_to_world] = np.roll(attitude.as_quat(), 1, axis=1)
+        x[:, StateIndex.q_body_to_world] = q
         x[:, StateIndex.v_world] = v0
-        x[:, StateIndex.rotor_thrusts] = (mass * GRAVITY / 4.0)[:, None]
+        x[:, StateIndex.omega_body] = 0.0
+        x[:, StateIndex.rotor_thrusts] = np.reshape(mass * (GRAVITY / 4.0), (-1, 1))
         sim.x[rows] = x
-        R = attitude.as_matrix()  # (k, 3, 3)
-        self.R[rows] = R.transpose(0, 2, 1).reshape(-1, 9)
+        R = quat_to_rotation_rows(q)  # (k, 3, 3)
+        self.R[rows] = R.transpose(0, 2, 1).reshape(k, 9)
         if self._n_walls:
-            rotors_world = p0[:, None, :] + np.einsum("kij,rj->kri", R, self._rotors)  # (k, 4, 3)
-            scene = sim.scene[rows]
-            points = scene[:, : 6 * self._n_walls].reshape(-1, self._n_walls, 2, 3)
-            d = np.einsum("kwi,kri->kwr", points[:, :, 1], rotors_world) \
-                - np.einsum("kwi,kwi->kw", points[:, :, 1], points[:, :, 0])[:, :, None]  # (k, walls, 4)
-            self.distances[rows] = d.transpose(0, 2, 1).reshape(len(rows), -1)
+            rotors_world = p0[:, :, None] + (R.reshape(3 * k, 3) @ self._rotors.T).reshape(k, 3, 4)
+            walls = sim.scene[rows, : 6 * self._n_walls].reshape(k, self._n_walls, 2, 3)
+            normals = walls[:, :, 1]
+            d = (normals[:, :, :, None] * (rotors_world[:, None] - walls[:, :, 0, :, None])).sum(axis=2)  # (k, walls, 4)
+            self.distances[rows] = d.transpose(0, 2, 1).reshape(k, -1)
         self.step_index[rows] = 0
         self.previous_action[rows] = 0.0
         self.collisions[rows] = 0

@@ -28,11 +28,12 @@ from wall_env.tasks import TASKS, TaskSpec, min_standoff
 from wall_env.validation import check_positive, check_range
 from wall_env.vehicle import GRAVITY, VehicleParams
 
-__all__ = ["EnvConfig", "DEFAULT_REWARD_WEIGHTS", "RANDOMIZABLE", "RENDER_MODES"]
+__all__ = ["EnvConfig", "DEFAULT_REWARD_WEIGHTS", "RANDOMIZABLE", "RENDER_MODES", "MAX_EPISODE_STEPS"]
 
 DEFAULT_REWARD_WEIGHTS = {"alive": 1.0, "position": 2.0, "velocity": 0.2, "smoothness": 0.1, "body_rate": 0.01}
 RANDOMIZABLE = ("k_s", "d_thr", "standoff", "mass")
 RENDER_MODES = ("human", "rgb_array")
+MAX_EPISODE_STEPS = 1_000_000  # the longest episode (duration / control_dt) any settings allow
 
 
 def _load_vehicle(vehicle: Any) -> VehicleParams:
@@ -213,8 +214,9 @@ class EnvConfig:
         standoff = check_range("standoff", spec.standoff if standoff is None else standoff, lowest, 5.0)
         altitude = check_range("altitude", spec.altitude if altitude is None else altitude, 0.1, 100.0)
         duration = check_range("duration", spec.duration if duration is None else duration, 0.05, 3600.0)
-        if duration / control_dt > 1e6:
-            raise ValueError(f"duration / control_dt must be at most 1e6 steps, got {duration / control_dt:g}")
+        if round(duration / control_dt) > MAX_EPISODE_STEPS:
+            raise ValueError(f"duration / control_dt must be at most {MAX_EPISODE_STEPS:,} steps, "
+                             f"got {duration / control_dt:,.0f}")
         if ground_z is not None:
             ground_z = check_range("ground_z", ground_z, -100.0, altitude - 0.3)
         if ceiling_z is not None:

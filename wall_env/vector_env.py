@@ -116,7 +116,7 @@ class WallInspectorVectorEnv(VectorEnv):
         if self.closed:
             raise RuntimeError("reset() after close(): this vector env is closed; make a new one")
         spread = check_reset_options(options, ("perturb_start", "reset_mask"))
-        rows = self._all
+        rows: np.ndarray | slice = slice(None)
         if options and "reset_mask" in options:
             mask = np.asarray(options["reset_mask"])
             if mask.dtype != bool or mask.shape != (self.num_envs,):
@@ -125,7 +125,7 @@ class WallInspectorVectorEnv(VectorEnv):
             rows = np.flatnonzero(mask)
         seeds = self._seeds(seed)
         if seeds is not None:
-            self.batch.streams.seed(rows, [seeds[k] for k in rows])
+            self.batch.streams.seed(self._all[rows], [seeds[k] for k in self._all[rows]])
             self._np_random, self._np_random_seed = seeding.np_random(seeds[0] if seeds[0] is not None else None)
         elif not self._seeded:
             self.batch.streams.seed(self._all, [None] * self.num_envs)
