@@ -52,15 +52,16 @@ def check_actions(actions: Any, n: int | None) -> np.ndarray:
 
 
 def info_row(info: dict[str, Any], k: int) -> dict[str, Any]:
-    """Row ``k`` of a batch info (arrays of ``n`` rows, nested dicts) with plain Python scalars."""
+    """Row ``k`` of a batch info from :meth:`EnvBatch.infos` (fresh arrays of ``n`` rows, nested
+    dicts), with plain Python scalars; vectors are views of those fresh arrays."""
     out: dict[str, Any] = {}
     for key, value in info.items():
-        if isinstance(value, dict):
+        if type(value) is dict:
             out[key] = info_row(value, k)
         elif value.ndim == 1:
-            out[key] = value[k].item() if value.dtype != object else value[k]
+            out[key] = value[k] if value.dtype == object else value[k].item()
         else:
-            out[key] = value[k].copy()
+            out[key] = value[k]
     return out
 
 
@@ -207,13 +208,13 @@ class EnvBatch:
         w = cfg.reward_weights
         p_error = x[:, StateIndex.p_world] - (self._ref_p[i] + self.ref_offset)
         v_error = x[:, StateIndex.v_world] - self._ref_v[i]
-        error = np.sqrt(np.einsum("ki,ki->k", p_error, p_error))
+        error = np.sqrt((p_error * p_error).sum(axis=1))
         omega = x[:, StateIndex.omega_body]
         change = a - self.previous_action
         reward = (w["alive"] - w["position"] * error
-                  - w["velocity"] * np.sqrt(np.einsum("ki,ki->k", v_error, v_error))
-                  - w["smoothness"] * np.einsum("ki,ki->k", change, change)
-                  - w["body_rate"] * np.einsum("ki,ki->k", omega, omega))
+                  - w["velocity"] * np.sqrt((v_error * v_error).sum(axis=1))
+                  - w["smoothness"] * (change * change).sum(axis=1)
+                  - w["body_rate"] * (omega * omega).sum(axis=1))
         strayed = ~(error <= cfg.max_tracking_error)  # also catches a NaN state
         reward -= cfg.collision_penalty * (contact | strayed)
         terminated = strayed | (contact & cfg.terminate_on_collision)
