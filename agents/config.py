@@ -15,13 +15,12 @@ Task names are accepted in any of the forms ``WallSweep``, ``WallSweep-v0``,
 from __future__ import annotations
 
 import copy
-import re
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from wall_env.tasks import TASKS
+from wall_env.tasks import task_env_id, task_name, task_slug
 from wall_env.validation import read_mapping
 
 __all__ = [
@@ -81,31 +80,6 @@ _BASE: dict[str, Any] = {
 
 _ACTIVATIONS = ("tanh", "relu", "elu")
 _RESIDUAL_BASES = (None, "pid", "scmpc")
-
-
-def task_name(name: str) -> str:
-    """Canonical task name (``"WallSweep"``) from any accepted spelling."""
-    text = str(name).strip()
-    text = text.split("/")[-1]
-    text = re.sub(r"-v\d+$", "", text)
-    if text in TASKS:
-        return text
-    camel = "".join(part.capitalize() for part in text.split("_"))
-    if camel in TASKS:
-        return camel
-    lowered = {t.lower(): t for t in TASKS}
-    if text.lower() in lowered:
-        return lowered[text.lower()]
-    raise ValueError(f"unknown task {name!r}; choose from {', '.join(f'WallInspector/{t}-v0' for t in TASKS)}")
-
-
-def task_env_id(name: str) -> str:
-    return f"WallInspector/{task_name(name)}-v0"
-
-
-def task_slug(name: str) -> str:
-    """File-system name of a task: ``WallSweep`` -> ``wall_sweep``."""
-    return re.sub(r"(?<!^)(?=[A-Z])", "_", task_name(name)).lower()
 
 
 def _merge(base: dict, update: dict) -> dict:

@@ -3,7 +3,8 @@
 Controllers are built from an environment the way a Stable-Baselines3 agent is,
 but they read only the attributes that :class:`wall_env.WallInspectorEnv`
 documents for controllers: ``vehicle``, ``scene``, ``reference``,
-``action_mapping``, ``nominal_model`` and ``control_dt``. The simulator's own
+``action_mapping``, ``nominal_model``, ``control_dt`` and ``task`` (its
+:class:`~wall_env.tasks.TaskSpec`, whose name picks the controllers' tuned presets). The simulator's own
 effect settings (its hidden suction parameters, noise, randomisation) are never
 read; a controller that wants to know the suction gets it from its caller or a
 model file.
@@ -25,9 +26,9 @@ from wall_env.references import Reference
 from wall_env.scene import Scene
 from wall_env.vehicle import VehicleParams
 
-__all__ = ["EnvDescription", "describe_env", "PUBLIC_ATTRIBUTES"]
+__all__ = ["EnvDescription", "describe_env", "read_scene_and_reference", "PUBLIC_ATTRIBUTES"]
 
-PUBLIC_ATTRIBUTES = ("vehicle", "scene", "reference", "action_mapping", "nominal_model", "control_dt")
+PUBLIC_ATTRIBUTES = ("vehicle", "scene", "reference", "action_mapping", "nominal_model", "control_dt", "task")
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,7 @@ class EnvDescription:
     action_mapping: ActionMapping
     nominal_model: AeroModel
     control_dt: float  # s
+    task: str  # task name, e.g. "WallSweep"
 
 
 def _read_attribute(env: Any, name: str) -> Any:
@@ -77,4 +79,19 @@ def describe_env(env: Any) -> EnvDescription:
             f"{list(PUBLIC_ATTRIBUTES)}; {type(env).__name__} lacks {missing}"
         )
     values["control_dt"] = float(values["control_dt"])
+    values["task"] = str(getattr(values["task"], "name", values["task"]))  # the env holds a TaskSpec
     return EnvDescription(**values)
+
+
+def read_scene_and_reference(env: Any, index: int) -> tuple[Scene, Reference]:
+    """The scene and reference of sub-env ``index`` of ``env`` now (after its latest reset).
+
+    A randomised stand-off makes the env rebuild both at every reset; controllers
+    read them again at each episode start through this function.
+    """
+    if hasattr(env, "num_envs") and hasattr(env, "get_attr"):
+        try:  # Stable-Baselines3 VecEnv: get_attr(name, indices)
+            return env.get_attr("scene", indices=[index])[0], env.get_attr("reference", indices=[index])[0]
+        except TypeError:  # Gymnasium vector env: get_attr(name) gives every sub-env's value
+            return env.get_attr("scene")[index], env.get_attr("reference")[index]
+    return _read_attribute(env, "scene"), _read_attribute(env, "reference")

@@ -22,6 +22,7 @@ memory between steps, so the controller is exact under batching.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -51,24 +52,36 @@ class PID(ControllerPolicy):
         self.position_error_limit = check_range("position_error_limit", position_error_limit, 1e-3, 100.0)
         self.velocity_error_limit = check_range("velocity_error_limit", velocity_error_limit, 1e-3, 100.0)
         self.max_tilt = math.radians(check_range("max_tilt_deg", max_tilt_deg, 1.0, 89.0))
-        self.reference = description.reference
 
     @classmethod
-    def from_env(cls, env: Any, **kwargs: Any) -> PID:
-        """A PID for ``env`` (plain, wrapped or vector env); keywords as in the constructor."""
-        return cls(cls._description(env), **kwargs)
+    def from_env(cls, env: Any, *, preset: str | Path | None = "tuned", **kwargs: Any) -> PID:
+        """A PID for ``env`` (plain, wrapped or vector env); keywords as in the constructor.
+
+        ``preset``: gains from a preset (:mod:`controllers.presets`): ``"tuned"`` (default: the
+        tuned preset of the env's task), ``"paper"`` (the authors' gains), a file, or ``None`` for
+        the constructor's defaults (also the authors'). Keywords override the preset.
+        """
+        description = cls._description(env)
+        if preset is not None:
+            from controllers.presets import load_preset
+
+            kwargs = {**load_preset(preset, method="pid", task=description.task).controller_kwargs("pid"), **kwargs}
+        policy = cls(description, **kwargs)
+        policy.follow(env)
+        return policy
 
     def _command(self, fields: dict[str, np.ndarray], memory: Any, index: int) -> np.ndarray:
         t = float(fields["time"])
         e_p = np.clip(fields["p_error"], -self.position_error_limit, self.position_error_limit)
         e_v = np.clip(fields["v_error"], -self.velocity_error_limit, self.velocity_error_limit)
-        accelerations = self.reference.acceleration([t, t - _JERK_STEP, t + _JERK_STEP])
+        reference = memory["reference"]
+        accelerations = reference.acceleration([t, t - _JERK_STEP, t + _JERK_STEP])
         a_ref = accelerations[0]
         jerk = (accelerations[2] - accelerations[1]) / (2 * _JERK_STEP)
         a_des = a_ref - self.kp * e_p - self.kv * e_v
         mass = self.vehicle.mass
         f = thrust_vector(a_des, mass, GRAVITY)
-        R_des, z_des = attitude_from_thrust(f[None], self.reference.yaw, self.max_tilt)
+        R_des, z_des = attitude_from_thrust(f[None], reference.yaw, self.max_tilt)
         R = fields["R_body_to_world"]
         thrust = float(f @ R[:, 2])
         omega_ff = feedforward_body_rates(R_des, np.linalg.norm(f) / mass, jerk[None])[0]

@@ -10,6 +10,14 @@ when ``episode_start`` is not given, when the observation's time goes backwards
 (a reset). ``stable_baselines3.common.evaluation.evaluate_policy`` therefore takes
 them unchanged.
 
+Controllers follow the env they fly: a policy made by ``from_env(env)`` reads the
+scene (walls) and the reference of each sub-env again at each of its episode starts
+(:func:`~controllers.env_description.read_scene_and_reference`), because an env
+with a randomised stand-off rebuilds both at reset. A scene whose structure changed
+(another number of walls, a ground or ceiling added) cannot be followed by the
+compiled model and raises ``ValueError``. A policy made from an
+:class:`~controllers.env_description.EnvDescription` keeps that description's scene.
+
 Subclasses implement :meth:`ControllerPolicy._command`, which returns the
 physical command ``[T (N), wx, wy, wz (rad/s)]`` for one parsed observation; the
 base class maps it through the env's :class:`~wall_env.actions.ActionMapping`.
@@ -31,9 +39,11 @@ from typing import Any
 
 import numpy as np
 
-from controllers.env_description import EnvDescription, describe_env
+from controllers.env_description import EnvDescription, describe_env, read_scene_and_reference
 from controllers.flatness import attitude_error, level_attitude
 from wall_env.observation import OBSERVATION_FIELDS, OBSERVATION_SIZE, parse_observation
+from wall_env.references import Reference
+from wall_env.scene import Scene
 from wall_env.vehicle import GRAVITY
 
 __all__ = ["ControllerPolicy", "SolverFailure", "hover_command", "LEVELLING_GAIN"]
@@ -77,10 +87,15 @@ class ControllerPolicy(ABC):
         self.failure_log: list[str] = []
         self._memory: list[Any] = []
         self._last_time: list[float] = []
+        self._env_source: Any = None
 
     @classmethod
     def _description(cls, env: Any) -> EnvDescription:
         return env if isinstance(env, EnvDescription) else describe_env(env)
+
+    def follow(self, env: Any) -> None:
+        """Read the scene and reference of ``env``'s sub-envs at each episode start (``from_env`` calls this)."""
+        self._env_source = None if isinstance(env, EnvDescription) else env
 
     # ------------------------------------------------------------------ SB3 interface
     def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
@@ -101,7 +116,7 @@ class ControllerPolicy(ABC):
         for i in range(n):
             t = batch[i, _TIME_INDEX]
             if starts[i] or self._memory[i] is None or (np.isfinite(t) and t < self._last_time[i]):
-                self._memory[i] = self._new_memory()
+                self._memory[i] = self._episode_memory(i)
             if np.isfinite(t):
                 self._last_time[i] = t
             command = self._safe_command(batch[i], i)
@@ -118,9 +133,19 @@ class ControllerPolicy(ABC):
     def _command(self, fields: dict[str, np.ndarray], memory: Any, index: int) -> np.ndarray:
         """Physical command ``[T, wx, wy, wz]`` for one parsed observation."""
 
-    def _new_memory(self) -> Any:
-        """Fresh per-env memory at an episode start."""
-        return {}
+    def _new_memory(self, scene: Scene, reference: Reference) -> dict[str, Any]:
+        """Fresh per-env memory at an episode start, for that episode's scene and reference."""
+        return {"scene": scene, "reference": reference}
+
+    def _episode_memory(self, index: int) -> dict[str, Any]:
+        scene, reference = self.description.scene, self.description.reference
+        if self._env_source is not None:
+            scene, reference = read_scene_and_reference(self._env_source, index)
+            if scene.structure != self.description.scene.structure:
+                raise ValueError(f"{self.name}: env {index} now has a scene of another structure "
+                                 f"({scene.structure} instead of {self.description.scene.structure}); "
+                                 "build the controller again for it")
+        return self._new_memory(scene, reference)
 
     def _before_batch(self, n: int) -> None:
         """Hook called once per :meth:`predict` with the batch size."""
@@ -147,7 +172,7 @@ class ControllerPolicy(ABC):
     def _fail(self, index: int, R: np.ndarray, reason: str) -> np.ndarray:
         self.failures += 1
         self.failure_log.append(reason)
-        self._memory[index] = self._new_memory()
+        self._memory[index] = self._new_memory(self._memory[index]["scene"], self._memory[index]["reference"])
         warnings.warn(f"{self.name}: {reason}; commanding hover (failure {self.failures})", RuntimeWarning,
                       stacklevel=4)
         return hover_command(self.vehicle.mass, R, self.vehicle.body_rate_max)

@@ -45,7 +45,7 @@ def _fixed_problem(policy: MPC, time: float, p_offset, v0, rotvec, seed: int = 0
     """A cold-start MPC problem near the wall: reference from the policy, perturbed measured state."""
     reference = policy.description.reference
     p_ref_now = reference.position([time])[0]
-    refs = policy.horizon_reference.build(time, p_ref_now, policy.global_params)
+    refs = policy.horizon_reference.build(reference, time, p_ref_now, policy.global_params)
     S = policy.problem.stage_params(refs.p_world, refs.v_world, refs.R_body_to_world)
     R0 = refs.R_body_to_world[0] @ Rotation.from_rotvec(rotvec).as_matrix()
     start = np.concatenate([[9.81, 0, 0, 0], p_ref_now + np.asarray(p_offset), R0.ravel(order="F"), v0])

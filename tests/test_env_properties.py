@@ -38,6 +38,8 @@ _KWARGS = st.fixed_dictionaries({}, optional={
     "randomize": st.one_of(_ANYTHING, st.dictionaries(st.sampled_from([*RANDOMIZABLE, "wind"]), _RANGE, max_size=3)),
     "vehicle": st.one_of(st.none(), st.dictionaries(st.sampled_from(["mass", "arm_length", "duct_radius", "wingspan"]),
                                                     _ANYTHING, max_size=2)),
+    "task_params": st.one_of(_ANYTHING, st.dictionaries(st.sampled_from(["radius", "period", "bogus"]), _ANYTHING,
+                                                        max_size=2)),
     "render_mode": st.one_of(st.none(), st.sampled_from(["rgb_array", "video", ""])),
 })
 

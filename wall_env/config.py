@@ -124,6 +124,7 @@ class EnvConfig:
     altitude: float
     duration: float
     base_scene: Scene
+    task_params: dict[str, float]
     randomize: dict[str, tuple[float, float]]
     render_mode: str | None
     render_size: tuple[int, int]
@@ -140,6 +141,7 @@ class EnvConfig:
         standoff: float | None = None,
         altitude: float | None = None,
         duration: float | None = None,
+        task_params: dict[str, float] | None = None,
         noise: bool = True,
         thrust_noise_std: float = 0.2,
         rate_noise_std: float = 0.2,
@@ -222,8 +224,9 @@ class EnvConfig:
         if ceiling_z is not None:
             ceiling_z = check_range("ceiling_z", ceiling_z, altitude + 0.1, 1000.0)
         base_scene = Scene((), ground_z, ceiling_z)
+        params = spec.check_params(task_params)
         ranges = _check_randomize(randomize, truth, vehicle_params, lowest)
-        geometry = _standoff_geometry(spec, standoff, altitude, duration, base_scene, control_dt)
+        geometry = _standoff_geometry(spec, standoff, altitude, duration, base_scene, params, control_dt)
 
         return cls(
             task=spec, vehicle=vehicle_params, truth=truth, nominal_model=nominal_aero_model(vehicle_params),
@@ -234,7 +237,8 @@ class EnvConfig:
             restitution=check_range("restitution", restitution, 0.0, 1.0),
             max_tracking_error=check_positive("max_tracking_error", max_tracking_error, high=100.0),
             reward_weights=weights, standoff=standoff, altitude=altitude, duration=duration,
-            base_scene=base_scene, randomize=ranges, render_mode=render_mode, render_size=(width, height),
+            base_scene=base_scene, task_params=params, randomize=ranges, render_mode=render_mode,
+            render_size=(width, height),
             min_standoff=lowest, geometry=geometry,
         )
 
@@ -251,8 +255,8 @@ class EnvConfig:
 
     def build(self, standoff: float | None = None) -> tuple[Scene, Reference]:
         """Scene and reference for ``standoff`` (default: the configured one)."""
-        return self.task.build(self.standoff if standoff is None else standoff, self.altitude, self.duration,
-                               self.base_scene)
+        return self.task.scene_and_reference(self.standoff if standoff is None else standoff, self.altitude,
+                                             self.duration, self.base_scene, self.task_params)
 
     @property
     def suction_columns(self) -> dict[str, int]:
@@ -308,13 +312,13 @@ def _check_randomize(ranges: Any, truth: AeroModel, vehicle: VehicleParams,
 
 
 def _standoff_geometry(spec: TaskSpec, standoff: float, altitude: float, duration: float, base: Scene,
-                       control_dt: float) -> StandoffGeometry:
+                       params: dict[str, float], control_dt: float) -> StandoffGeometry:
     """Sample the reference at the control rate and find how scene and reference shift with the
     stand-off (checked to be affine with a third stand-off, so a task that is not fails loudly)."""
     n = int(round(duration / control_dt)) + _preview_stride(control_dt) * PREVIEW_STEPS + 1
     times = np.arange(n) * control_dt
     probe = (standoff, standoff + 0.1, standoff + 0.25)
-    built = [spec.build(s, altitude, duration, base) for s in probe]
+    built = [spec.scene_and_reference(s, altitude, duration, base, params) for s in probe]
     scenes = [scene.to_vector() for scene, _ in built]
     samples = [reference.sample(times)[:2] for _, reference in built]
     scene_rate = (scenes[1] - scenes[0]) / 0.1

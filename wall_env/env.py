@@ -84,8 +84,8 @@ class WallInspectorEnv(gym.Env):
     k_s, d_thr: wall-suction scale (N/m, default 4.1) and threshold (m, default 0.132).
     standoff: wall to reference centre of mass (m; corridor: half-width). Task default if None.
     altitude, duration: reference height (m) and episode length (s). Task defaults if None.
-        ``gym.make`` also caps episodes at the registered ``max_episode_steps`` (the task's
-        default duration); pass ``max_episode_steps`` with a longer duration.
+    task_params: shape parameters of the task's reference (:class:`~wall_env.tasks.TaskParameter`),
+        e.g. ``{"radius": 0.3, "period": 6.0}`` for ``WallCircle``; defaults for those not given.
     noise: add command noise (True/False); ``thrust_noise_std`` (N) and ``rate_noise_std`` (rad/s) set it.
     effects: further effects in the simulator, e.g. ``{"ground_effect": {"radius": 0.08}}``, or
         options of the suction, ``{"wall_suction": {"thrust_scaling": True}}``.
@@ -128,6 +128,7 @@ class WallInspectorEnv(gym.Env):
         self.reward_weights = dict(config.reward_weights)
         self.standoff, self.altitude, self.duration = config.standoff, config.altitude, config.duration
         self.randomize = dict(config.randomize)
+        self.task_params = dict(config.task_params)
         self.n_steps = config.n_steps
         self.scene, self.reference = config.build()
         self.episode_parameters: dict[str, float] = {}

@@ -17,6 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench-env": ("wall_env.benchmark", "measure environment steps per second and reset time"),
     "bench-mpc": ("controllers.benchmark", "time SC-MPC solves in closed loop against IPOPT on the same problems"),
     "compare": ("wall_inspector.compare", "reproduce the paper's Tables I and II with PID, MPC and SC-MPC (tables, JSON, plots)"),
+    "tune": ("wall_inspector.tune", "tune a controller's gains or weights on a task within a budget (Optuna), write a preset"),
     "train": ("agents.train", "train a PPO agent on a wall task (checkpoints, TensorBoard, model card)"),
     "notebooks": ("wall_inspector.notebooks", "run the notebooks top to bottom (and save their outputs)"),
     "readme": ("wall_inspector.readme", "copy result tables written by other commands into README.md"),

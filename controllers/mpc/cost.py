@@ -188,12 +188,17 @@ class MPCProblem:
                 self.horizon)
 
     # ------------------------------------------------------------------ numeric parameters
-    def global_params(self, mass: float | None = None) -> np.ndarray:
+    def global_params(self, mass: float | None = None, scene: Scene | None = None) -> np.ndarray:
+        """The global parameter vector; ``scene`` replaces the problem's walls (same structure)."""
+        scene = self.scene if scene is None else scene
+        if scene.structure != self.scene_structure:
+            raise ValueError(f"scene must have the structure the problem was built for, {self.scene_structure}, "
+                             f"got {scene.structure}")
         low, high = self.limits.bounds()
         return np.concatenate([
             [self.dt, self.vehicle.mass if mass is None else mass],
             self.weights.inverse_sigmas(), low, high,
-            self.model.theta(), self.scene.to_vector(),
+            self.model.theta(), scene.to_vector(),
         ])
 
     def stage_params(self, p_ref: np.ndarray, v_ref: np.ndarray, R_ref: np.ndarray) -> np.ndarray:

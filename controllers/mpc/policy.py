@@ -6,8 +6,9 @@ Each control step, for each env of the batch:
    repeated), or, at an episode start, the reference states with the flatness
    thrust and zero body rates (a *cold* start, given more iterations);
 2. the reference states of the horizon (:mod:`controllers.mpc.reference`) from the
-   observation's time and reference position, the attitude reference including the
-   model's force at the states the warm start predicts;
+   observation's time and reference position, the attitude reference including a
+   model's force at the states the warm start predicts (SC-MPC's ``compensation``
+   says whether that force includes the suction);
 3. Levenberg-Marquardt on the paper's least-squares problem
    (:mod:`controllers.mpc.cost`, :mod:`controllers.mpc.lm`) from the measured state
    ``x_0 = (p_world, R_body_to_world, v_world)``;
@@ -19,6 +20,13 @@ drag); :class:`SCMPC` is the same class with the nominal model plus the paper's
 ``wall_suction`` effect (explicit ``k_s``, ``d_thr``) or every effect of a model
 file (:class:`wall_env.model_file.FlightModel`). Neither reads the simulator's own
 effect settings.
+
+SC-MPC's ``compensation``: ``"dynamics"`` is the paper's formulation (the suction
+only in the dynamics factor, Eq. 13 and 15); ``"dynamics+attitude"`` (the default)
+also puts the suction into the attitude reference at the predicted states
+(:mod:`controllers.mpc.reference` says why). ``from_env`` takes the weights,
+horizon and compensation of a preset (:mod:`controllers.presets`): by default
+the tuned preset of the env's task.
 
 Timing: :attr:`MPC.solve_times` lists the seconds each optimisation took (LM
 only, wall clock), :attr:`MPC.solve_cpu_times` the same in CPU time of the calling
@@ -52,9 +60,10 @@ from wall_env.model_file import FlightModel
 from wall_env.validation import check_range
 from wall_env.vehicle import VehicleParams
 
-__all__ = ["MPC", "SCMPC", "SolveRecord", "PAPER_SUCTION"]
+__all__ = ["MPC", "SCMPC", "SolveRecord", "PAPER_SUCTION", "COMPENSATION_MODES"]
 
 PAPER_SUCTION = {"k_s": 4.1, "d_thr": 0.132}  # the paper's flight-identified values (Sec. 4.4)
+COMPENSATION_MODES = ("dynamics", "dynamics+attitude")
 
 
 @dataclass
@@ -96,6 +105,7 @@ class MPC(ControllerPolicy):
     force_at_prediction: take that force at the warm start's predicted states (default)
         rather than on the reference. The two switches exist to measure what they are
         worth; the defaults are what makes SC-MPC compensate (measured there).
+    attitude_model: the model whose force enters the attitude reference; default ``model``.
     """
 
     name = "MPC"
@@ -103,7 +113,8 @@ class MPC(ControllerPolicy):
     def __init__(self, description: EnvDescription, model: AeroModel | None = None, *,
                  vehicle: VehicleParams | None = None, horizon: int = 20, dt: float = 0.01,
                  weights: MPCWeights | None = None, limits: InputLimits | None = None,
-                 solver: LMSettings | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True, force_at_prediction: bool = True):
+                 solver: LMSettings | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True,
+                 force_at_prediction: bool = True, attitude_model: AeroModel | None = None):
         super().__init__(description)
         if model is not None and not isinstance(model, AeroModel):
             raise ValueError(f"model must be a wall_env.AeroModel, got {type(model).__name__}")
@@ -111,12 +122,18 @@ class MPC(ControllerPolicy):
             raise ValueError(f"vehicle must be a wall_env.VehicleParams, got {type(vehicle).__name__}")
         self.model = model if model is not None else description.nominal_model
         self.model_vehicle = vehicle if vehicle is not None else description.vehicle
+        if attitude_model is not None and not isinstance(attitude_model, AeroModel):
+            raise ValueError(f"attitude_model must be a wall_env.AeroModel, got {type(attitude_model).__name__}")
         self.problem = MPCProblem(self.model_vehicle, self.model, description.scene, horizon, dt, weights, limits)
         self.solver = LevenbergMarquardt(self.problem, solver)
         max_tilt = math.radians(check_range("max_tilt_deg", max_tilt_deg, 1.0, 89.0))
-        self.horizon_reference = HorizonReference(description.reference, self.problem, max_tilt, model_attitude)
+        self.attitude_model = self.model if attitude_model is None else attitude_model
+        self.attitude_problem = (self.problem if self.attitude_model == self.model else
+                                 MPCProblem(self.model_vehicle, self.attitude_model, description.scene, horizon, dt,
+                                            weights, limits))
+        self.horizon_reference = HorizonReference(self.attitude_problem, max_tilt, model_attitude)
         self.force_at_prediction = bool(force_at_prediction)
-        self.global_params = self.problem.global_params()
+        self.global_params = self.problem.global_params()  # for the description's scene
         self.shift = max(1, int(round(self.control_dt / self.problem.dt)))
         self.solve_times: list[float] = []
         self.solve_cpu_times: list[float] = []
@@ -125,9 +142,17 @@ class MPC(ControllerPolicy):
         self.last_solves: list[SolveRecord | None] = []
 
     @classmethod
-    def from_env(cls, env: Any, **kwargs: Any) -> MPC:
-        """Nominal MPC for ``env`` (plain, wrapped or vector env), predicting with its ``nominal_model``."""
-        return cls(cls._description(env), **kwargs)
+    def from_env(cls, env: Any, *, preset: str | Path | None = "tuned", **kwargs: Any) -> MPC:
+        """Nominal MPC for ``env`` (plain, wrapped or vector env), predicting with its ``nominal_model``.
+
+        ``preset``: weights and horizon from a preset (:mod:`controllers.presets`): ``"tuned"``
+        (default: the tuned preset of the env's task), ``"paper"``, ``"paper-sim"``, a file, or
+        ``None`` for the constructor's defaults (the authors' release). Keywords override it.
+        """
+        description = cls._description(env)
+        policy = cls(description, **{**_preset_kwargs(preset, "mpc", description), **kwargs})
+        policy.follow(env)
+        return policy
 
     # ------------------------------------------------------------------ statistics
     def clear_statistics(self) -> None:
@@ -141,8 +166,13 @@ class MPC(ControllerPolicy):
         if len(self.last_solves) != n:
             self.last_solves = [None] * n
 
-    def _new_memory(self) -> dict[str, Any]:
-        return {"Z": None}
+    def _new_memory(self, scene, reference) -> dict[str, Any]:
+        memory = super()._new_memory(scene, reference)
+        memory["Z"] = None
+        memory["global"] = self.problem.global_params(scene=scene)
+        memory["attitude_global"] = (memory["global"] if self.attitude_problem is self.problem
+                                     else self.attitude_problem.global_params(scene=scene))
+        return memory
 
     def initial_guess(self, refs: ReferenceStates) -> np.ndarray:
         """Cold start: the reference states, flatness thrust and zero body rates."""
@@ -170,19 +200,19 @@ class MPC(ControllerPolicy):
             p_pred, v_pred = Z_warm[PointIndex.p_world].T, Z_warm[PointIndex.v_world].T
         else:
             p_pred = v_pred = None
-        refs = self.horizon_reference.build(float(fields["time"]), p - fields["p_error"], self.global_params,
-                                            p_pred, v_pred)
+        refs = self.horizon_reference.build(memory["reference"], float(fields["time"]), p - fields["p_error"],
+                                            memory["attitude_global"], p_pred, v_pred)
         S = self.problem.stage_params(refs.p_world, refs.v_world, refs.R_body_to_world)
         Z0 = self.initial_guess(refs) if cold else Z_warm
         start = pack_point(np.zeros(4), p, R, v)  # its input slot is unused: no rate residual at stage 0
         t_solve, cpu_solve = time.perf_counter(), time.thread_time()
-        result = self.solver.solve(Z0, start, S, self.global_params, cold=cold)
+        result = self.solver.solve(Z0, start, S, memory["global"], cold=cold)
         t_end, cpu_end = time.perf_counter(), time.thread_time()
         if not (np.all(np.isfinite(result.Z)) and math.isfinite(result.cost)):
             raise SolverFailure(f"non-finite MPC solution (cost {result.cost})")
         memory["Z"] = result.Z
         command = result.Z[PointIndex.u, 0].copy()
-        self.last_solves[index] = SolveRecord(Z0, start, S, self.global_params, cold, result)
+        self.last_solves[index] = SolveRecord(Z0, start, S, memory["global"], cold, result)
         self.solve_times.append(t_end - t_solve)
         self.solve_cpu_times.append(cpu_end - cpu_solve)
         self.step_times.append(t_end - t_start)
@@ -191,28 +221,60 @@ class MPC(ControllerPolicy):
 
 
 class SCMPC(MPC):
-    """Suction-compensated MPC: :class:`MPC` whose model adds the wall suction (paper Eq. 9-10)."""
+    """Suction-compensated MPC: :class:`MPC` whose model adds the wall suction (paper Eq. 9-10).
+
+    ``compensation``: ``"dynamics+attitude"`` (default) or ``"dynamics"`` (the paper's form);
+    see the module docstring. Other arguments as :class:`MPC`.
+    """
 
     name = "SC-MPC"
 
+    def __init__(self, description: EnvDescription, model: AeroModel | None = None, *,
+                 compensation: str = "dynamics+attitude", **kwargs: Any):
+        if compensation not in COMPENSATION_MODES:
+            raise ValueError(f"compensation must be one of {list(COMPENSATION_MODES)}, got {compensation!r}")
+        if "attitude_model" in kwargs:
+            raise ValueError("SCMPC sets attitude_model from compensation; do not pass both")
+        self.compensation = compensation
+        model = model if model is not None else description.nominal_model
+        attitude_model = model.without("wall_suction") if compensation == "dynamics" else None
+        super().__init__(description, model, attitude_model=attitude_model, **kwargs)
+        if compensation == "dynamics":
+            self.name = "SC-MPC (dynamics only)"
+
     @classmethod
     def from_env(cls, env: Any, *, k_s: float | None = None, d_thr: float | None = None,
-                 model: str | Path | FlightModel | None = None, **kwargs: Any) -> SCMPC:
+                 model: str | Path | FlightModel | None = None, preset: str | Path | None = "tuned",
+                 **kwargs: Any) -> SCMPC:
         """SC-MPC for ``env``.
 
         The suction comes from ``k_s`` (N/m) and ``d_thr`` (m) -- missing ones take the
         paper's identified values 4.1 N/m and 0.132 m -- or from a model file
         ``model`` (path or :class:`FlightModel`), whose vehicle and every effect
         (``aero_model()``: nominal drag, wall suction, anything else it holds) become
-        the prediction model. Giving both raises ``ValueError``.
+        the prediction model. Giving both raises ``ValueError``. ``preset`` as in
+        :meth:`MPC.from_env` (weights, horizon and compensation); keywords override it.
         """
         description = cls._description(env)
+        kwargs = {**_preset_kwargs(preset, "scmpc", description), **kwargs}
         if model is not None:
             if k_s is not None or d_thr is not None:
                 raise ValueError("give the suction either as k_s/d_thr or as a model file, not both")
             flight_model = model if isinstance(model, FlightModel) else FlightModel.load(model)
-            return cls(description, flight_model.aero_model(), vehicle=flight_model.vehicle, **kwargs)
-        suction = make_effect("wall_suction",
-                              k_s=PAPER_SUCTION["k_s"] if k_s is None else k_s,
-                              d_thr=PAPER_SUCTION["d_thr"] if d_thr is None else d_thr)
-        return cls(description, description.nominal_model.with_effect(suction), **kwargs)
+            policy = cls(description, flight_model.aero_model(), vehicle=flight_model.vehicle, **kwargs)
+        else:
+            suction = make_effect("wall_suction",
+                                  k_s=PAPER_SUCTION["k_s"] if k_s is None else k_s,
+                                  d_thr=PAPER_SUCTION["d_thr"] if d_thr is None else d_thr)
+            policy = cls(description, description.nominal_model.with_effect(suction), **kwargs)
+        policy.follow(env)
+        return policy
+
+
+def _preset_kwargs(preset: str | Path | None, method: str, description: EnvDescription) -> dict[str, Any]:
+    """Constructor keywords of ``method`` from ``preset`` for the env's task (``{}`` for ``None``)."""
+    if preset is None:
+        return {}
+    from controllers.presets import load_preset
+
+    return load_preset(preset, method=method, task=description.task).controller_kwargs(method)

@@ -8,28 +8,35 @@ has moved is still followed exactly.
 
 The attitude reference follows from differential flatness
 (:mod:`controllers.flatness`) of the reference acceleration and yaw, with the
-thrust vector the controller's *own model* asks for:
+thrust vector a *force model* asks for:
 
-    f_k = m (a_ref,k + g e3) - F_aero(p_k, R, v_k, T = |f_k|)
+    f_k = m (a_ref,k + g e3) - F_model(p_k, R, v_k, T = |f_k|)
 
-where ``F_aero`` is the MPC's model force (:meth:`MPCProblem.aero_force_function`,
-evaluated once at the kinematic attitude and thrust, then the attitude is
-recomputed) at the states ``p_k, v_k`` where the warm start predicts the vehicle
-(on the reference itself at a cold start). For the nominal MPC that adds the
-drag, for SC-MPC also the suction, whose pull the vehicle must lean against.
+where ``F_model`` is the force of an :class:`~controllers.mpc.cost.MPCProblem`'s
+model (:meth:`MPCProblem.aero_force_function`, evaluated once at the kinematic
+attitude and thrust, then the attitude is recomputed) at the states ``p_k, v_k``
+where the warm start predicts the vehicle (on the reference itself at a cold
+start). Which model that is, is SC-MPC's ``compensation`` choice
+(:class:`controllers.mpc.policy.SCMPC`):
 
-Why the model force, and why at the predicted states: the rotation residual
-(sigma 0.3 rad) prices every lean away from ``R_ref`` against the position residual
-(sigma 0.15 m), which with the authors' weights makes a lateral stiffness of only
-about 6 N/m per kg. With a purely kinematic ``R_ref`` SC-MPC would have to pay for
-the lean that holds it off the wall and would settle toward it exactly like the
-nominal MPC. With the force taken on the reference, the lean for the suction *at
-the reference* is free, but the growth of the suction toward the wall (2 k_s =
-8.2 N/m in the sweep) still exceeds that stiffness, and SC-MPC was measured to end
-on the wall (372 contact steps in a noise-free sweep). Taking the force where the
-vehicle is predicted to be makes the whole compensating lean free and leaves the
-weights to act on the tracking error only (noise-free sweep: no contact, 0.99 cm
-wall-normal RMSE). It is the same code for both MPCs, only the model differs.
+``"dynamics"`` (the paper, Sec. 3.3)
+    the suction enters only the dynamics factor (Eq. 13, 15); the attitude
+    reference carries the nominal model's force (the vehicle's drag), exactly as
+    the nominal MPC's does.
+``"dynamics+attitude"`` (this project's addition)
+    the attitude reference also carries the suction at the predicted states, so
+    the lean that holds the vehicle off the wall is the reference itself.
+
+Why the addition exists: the rotation residual prices every lean away from
+``R_ref`` against the position residual. With the authors' sigmas (rotation
+0.3 rad, position 0.15 m) that makes a lateral stiffness of only about 2.8 N/m per
+kg (:mod:`controllers.stiffness`), below the suction's own growth toward the wall
+(2 k_s = 8.2 N/m in the sweep), so with the paper's form alone SC-MPC has to pay
+for the compensating lean and settles onto the wall like the nominal MPC. Taking
+the suction into the reference at the predicted states makes that lean free and
+leaves the weights to act on the tracking error only. With stiffer weights (the
+tuned presets, ``controllers/presets``) the paper's form holds the vehicle off the
+wall by itself; ``wall-inspector compare`` flies both forms side by side.
 """
 
 from __future__ import annotations
@@ -72,35 +79,37 @@ def _mapped_force_function(problem: MPCProblem) -> ca.Function:
 
 
 class HorizonReference:
-    """Builds :class:`ReferenceStates` for a horizon of ``problem.horizon`` steps of ``problem.dt``.
+    """Builds :class:`ReferenceStates` for a horizon of ``force_problem.horizon`` steps of ``force_problem.dt``.
 
+    ``force_problem``: the :class:`MPCProblem` whose model force enters the attitude
+    reference (its global parameters are passed to :meth:`build`).
     ``model_attitude=False`` drops the model force from the attitude reference (pure
     kinematic flatness); it exists to measure what the model-consistent reference
     is worth, not for use.
     """
 
-    def __init__(self, reference: Reference, problem: MPCProblem, max_tilt: float = math.radians(80.0),
+    def __init__(self, force_problem: MPCProblem, max_tilt: float = math.radians(80.0),
                  model_attitude: bool = True):
-        self.reference = reference
-        self.problem = problem
+        self.force_problem = force_problem
         self.max_tilt = max_tilt
         self.model_attitude = bool(model_attitude)
-        N = problem.horizon
-        self._steps = np.arange(N + 1) * problem.dt
-        self._force = CompiledFunction(_mapped_force_function(problem))
+        N = force_problem.horizon
+        self._steps = np.arange(N + 1) * force_problem.dt
+        self._force = CompiledFunction(_mapped_force_function(force_problem))
 
-    def build(self, time: float, p_ref_now: np.ndarray, global_params: np.ndarray,
+    def build(self, reference: Reference, time: float, p_ref_now: np.ndarray, force_params: np.ndarray,
               p_predicted: np.ndarray | None = None, v_predicted: np.ndarray | None = None) -> ReferenceStates:
-        """References for the horizon starting at ``time`` (s), anchored at ``p_ref_now`` (m, world).
+        """References along ``reference`` for the horizon starting at ``time`` (s), anchored at
+        ``p_ref_now`` (m, world), with the force of ``force_problem`` at global parameters ``force_params``.
 
         ``p_predicted``, ``v_predicted`` ``(N, 3)``: where the vehicle is predicted to be
         (the warm start); the model force is evaluated there if given, else on the reference.
         """
-        p, v, a = self.reference.sample(time + self._steps)
+        p, v, a = reference.sample(time + self._steps)
         offset = p_ref_now - p[0]
         p_ref, v_ref, a_ref = p[1:] + offset, v[1:], a[1:]
-        mass = global_params[1]
-        yaw = self.reference.yaw
+        mass = force_params[1]
+        yaw = reference.yaw
         f_kinematic = thrust_vector(a_ref, mass, GRAVITY)
         R_kinematic, _ = attitude_from_thrust(f_kinematic, yaw, self.max_tilt)
         if not self.model_attitude:
@@ -111,7 +120,7 @@ class HorizonReference:
         R_columns = R_kinematic.transpose(0, 2, 1).reshape(N, 9).T  # column-major per matrix
         p_at = p_ref if p_predicted is None else p_predicted
         v_at = v_ref if v_predicted is None else v_predicted
-        force = self._force(p_at.T, R_columns, v_at.T, u, global_params)[0].reshape(3, N, order="F").T
+        force = self._force(p_at.T, R_columns, v_at.T, u, force_params)[0].reshape(3, N, order="F").T
         f = f_kinematic - force
         R_ref, _ = attitude_from_thrust(f, yaw, self.max_tilt)
         return ReferenceStates(p_ref, v_ref, R_ref, np.linalg.norm(f, axis=1))

@@ -1,0 +1,158 @@
+"""``wall-inspector tune``: tune a controller's gains or weights on a task within a stated budget.
+
+Examples::
+
+    wall-inspector tune --env WallSweep-v0 --method scmpc                  # default budget: 50 trials, <= 20 min
+    wall-inspector tune --env WallSweep-v0 --method pid --budget-trials 20 --out runs/tune-pid
+    wall-inspector tune --objective paper-table-i --set standoff=0.15       # the paper-sim preset
+
+The study (Optuna, seeded TPE, :mod:`controllers.tuning`) is stored in
+``OUT/study.db``; Ctrl-C stops it and the same command resumes it. When the budget is
+spent the best settings fly the held-out seeds, and ``OUT/preset.yaml`` (a preset with
+its provenance: task, seeds, budget, objective values, command, commit) and
+``OUT/report.json`` are written; ``--ship`` also copies the preset to
+``controllers/presets/tuned/<task>_<method>.yaml`` (``paper-sim.yaml`` for the Table I
+objective), where ``from_env`` and ``compare`` find it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import shutil
+import sys
+from pathlib import Path
+
+_DEFAULT_TRAIN_SEEDS = "1000-1002"
+_DEFAULT_HELDOUT_SEEDS = "2000-2009"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--env", default="WallInspector/WallSweep-v0",
+                        help="task to tune on (env id or task name; default WallSweep-v0)")
+    parser.add_argument("--method", choices=("pid", "mpc", "scmpc"),
+                        help="controller to tune (required for the tracking objective)")
+    parser.add_argument("--objective", choices=("tracking", "paper-table-i"), default="tracking",
+                        help="tracking: wall-normal RMSE + contact and effort prices on the task (default); "
+                             "paper-table-i: MPC/SC-MPC sigmas that reproduce the paper's Table I")
+    parser.add_argument("--budget-trials", type=int, default=50, help="trials of the whole study (default 50)")
+    parser.add_argument("--budget-minutes", type=float, default=20.0,
+                        help="wall-time budget of the whole study in minutes (default 20; 0 for none)")
+    parser.add_argument("--seeds", default=_DEFAULT_TRAIN_SEEDS, help="training seeds, e.g. 1000-1002 or 1,2,3")
+    parser.add_argument("--heldout-seeds", default=_DEFAULT_HELDOUT_SEEDS,
+                        help="seeds the result is reported on (must differ from --seeds)")
+    parser.add_argument("--horizon-steps", default="",
+                        help="MPC horizon lengths N to choose from, e.g. 10,20,30 (default: keep N = 20)")
+    parser.add_argument("--fixed-dt", action="store_true", help="keep the MPC step dt = 0.01 s (default: tune it)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="environment keyword, e.g. k_s=10 or standoff=0.14 (repeatable)")
+    parser.add_argument("--sampler-seed", type=int, default=0, help="seed of the TPE sampler (default 0)")
+    parser.add_argument("--out", default=None, help="run folder (default runs/tune/<task>_<method>)")
+    parser.add_argument("--ship", action="store_true", help="copy the preset into controllers/presets")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+def parse_seeds(text: str, option: str) -> list[int]:
+    """``"1000-1002"`` or ``"1,2,5"`` (or a mix) to a list of seeds; ``ValueError`` naming ``option``."""
+    seeds: list[int] = []
+    try:
+        for part in filter(None, (p.strip() for p in text.split(","))):
+            if "-" in part[1:]:
+                low, high = part.split("-", 1) if not part.startswith("-") else (part, part)
+                low_i, high_i = int(low), int(high)
+                if high_i < low_i or high_i - low_i > 10000:
+                    raise ValueError
+                seeds += list(range(low_i, high_i + 1))
+            else:
+                seeds.append(int(part))
+    except ValueError:
+        raise ValueError(f"{option} must be seeds such as 1000-1002 or 1,2,3, got {text!r}") from None
+    if not seeds or any(s < 0 for s in seeds):
+        raise ValueError(f"{option} must name at least one non-negative seed, got {text!r}")
+    return seeds
+
+
+def _env_kwargs(items: list[str]) -> dict:
+    import yaml
+
+    out = {"noise": True, "terminate_on_collision": False}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"--set takes KEY=VALUE, got {item!r}")
+        try:
+            out[key.strip()] = yaml.safe_load(value)
+        except yaml.YAMLError:
+            raise ValueError(f"--set {key}: cannot read the value {value!r}") from None
+    return out
+
+
+def _error(message: str) -> int:
+    print(f"wall-inspector tune: error: {message}", file=sys.stderr)
+    return 2
+
+
+def run(args: argparse.Namespace) -> int:
+    import gymnasium as gym
+
+    import wall_env  # noqa: F401  (registers the environments)
+    from controllers.presets import PRESET_DIR, tuned_preset_path
+    from controllers.tuning import SearchSpace, Tuner, default_objective
+    from controllers.presets import load_preset
+    from wall_env.tasks import task_env_id, task_slug
+
+    # ---------------------------------------------------------- every argument checked before any work
+    try:
+        if args.objective == "paper-table-i":
+            env_id, method = "WallInspector/WallCircle-v0", "mpc+scmpc"
+        else:
+            if args.method is None:
+                raise ValueError("--method is required for the tracking objective (pid, mpc or scmpc)")
+            env_id, method = task_env_id(args.env), args.method
+        train = parse_seeds(args.seeds, "--seeds")
+        heldout = parse_seeds(args.heldout_seeds, "--heldout-seeds")
+        if set(train) & set(heldout):
+            raise ValueError(f"--heldout-seeds must differ from --seeds; both have {sorted(set(train) & set(heldout))}")
+        if not 1 <= args.budget_trials <= 100000:
+            raise ValueError(f"--budget-trials must be in [1, 100000], got {args.budget_trials}")
+        if not 0 <= args.budget_minutes <= 100000:
+            raise ValueError(f"--budget-minutes must be in [0, 100000] (0 for no limit), got {args.budget_minutes}")
+        steps = [int(n) for n in args.horizon_steps.split(",") if n.strip()] if args.horizon_steps else []
+        if method == "pid" and (steps or args.fixed_dt):
+            raise ValueError("--horizon-steps and --fixed-dt apply to the MPCs, not to pid")
+        env_kwargs = _env_kwargs(args.set)
+        probe = gym.make(env_id, **env_kwargs)  # the env's own checks name a bad keyword and its range
+        probe.close()
+        space_method = "mpc" if method == "mpc+scmpc" else method
+        space = SearchSpace(space_method, load_preset("paper", method=space_method).methods[space_method],
+                            tune_dt=not args.fixed_dt, horizon_steps=tuple(steps))
+        slug = "paper_table_i" if method == "mpc+scmpc" else f"{task_slug(env_id)}_{method}"
+        out = Path(args.out) if args.out else Path("runs") / "tune" / slug
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out {out} exists and is not a folder")
+    except (ValueError, TypeError) as exc:
+        return _error(str(exc))
+
+    command = "wall-inspector tune " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 1 \
+        and sys.argv[1] == "tune" else f"wall-inspector tune --env {env_id} --method {method}"
+    objective = default_objective(args.objective, env_id, method, train, env_kwargs)
+    tuner = Tuner(objective, heldout, out, budget_trials=args.budget_trials,
+                  budget_minutes=args.budget_minutes or None, seed=args.sampler_seed, space=space, command=command,
+                  progress=not args.no_progress)
+    try:
+        result = tuner.run()
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: the study is stored in {out / 'study.db'}; run the same command again to resume",
+              file=sys.stderr)
+        return 130
+    used = result.preset.provenance["used"]
+    print(f"{method} on {env_id}: best training objective {result.train_value:.4g}; held-out seeds "
+          f"{heldout[0]}..{heldout[-1]}: {result.heldout.value:.4g} (the authors' settings: "
+          f"{result.baseline_heldout.value:.4g})")
+    print(f"budget used: {used['trials']} trials, {used['env_steps']:,} env steps, {used['wall_time_s'] / 60:.1f} min")
+    print(f"wrote {result.paths['preset']} and {result.paths['report']}")
+    if args.ship:
+        target = PRESET_DIR / "paper-sim.yaml" if method == "mpc+scmpc" else tuned_preset_path(env_id, method)
+        shutil.copyfile(result.paths["preset"], target)
+        print(f"shipped {target}")
+    return 0
