@@ -224,31 +224,33 @@ class EnvBatch:
         return reward, terminated, truncated
 
     # ------------------------------------------------------------------ what the agent and the user see
-    def observations(self) -> np.ndarray:
-        """Observations of every row, ``(n, 48)`` float32 (layout: :mod:`wall_env.observation`)."""
-        n, f = self.n, OBSERVATION_FIELDS
-        x = self.simulator.x
-        i = self.step_index
+    def observations(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """Observations of ``rows`` (default all), ``(k, 48)`` float32 (layout: :mod:`wall_env.observation`)."""
+        f = OBSERVATION_FIELDS
+        x = self.simulator.x[rows]
+        i = self.step_index[rows]
+        n = x.shape[0]
+        offset = self.ref_offset[rows]
         obs = np.empty((n, OBSERVATION_SIZE))
         p_ref = self._ref_p[i]
         obs[:, f["p_world"]] = x[:, StateIndex.p_world]
         obs[:, f["v_world"]] = x[:, StateIndex.v_world]
-        obs[:, f["R_body_to_world"]] = self.R.reshape(n, 3, 3).transpose(0, 2, 1).reshape(n, 9)
+        obs[:, f["R_body_to_world"]] = self.R[rows].reshape(n, 3, 3).transpose(0, 2, 1).reshape(n, 9)
         obs[:, f["omega_body"]] = x[:, StateIndex.omega_body]
-        obs[:, f["p_error"]] = x[:, StateIndex.p_world] - (p_ref + self.ref_offset)
+        obs[:, f["p_error"]] = x[:, StateIndex.p_world] - (p_ref + offset)
         obs[:, f["v_error"]] = x[:, StateIndex.v_world] - self._ref_v[i]
         preview = self._ref_p[i[:, None] + self._preview] - p_ref[:, None, :]
         obs[:, f["reference_preview"]] = preview.reshape(n, -1)
         if self._n_walls:
-            d = self.distances.reshape(n, 4, self._n_walls)  # [row, rotor, wall]
+            d = self.distances[rows].reshape(n, 4, self._n_walls)  # [row, rotor, wall]
             obs[:, f["rotor_clearance"]] = np.minimum(d.min(axis=2), CLEARANCE_CAP)
             nearest = np.argmin(d.min(axis=1), axis=1)
-            normals = self.simulator.scene[:, : 6 * self._n_walls].reshape(n, self._n_walls, 2, 3)[:, :, 1]
+            normals = self.simulator.scene[rows, : 6 * self._n_walls].reshape(n, self._n_walls, 2, 3)[:, :, 1]
             obs[:, f["wall_normal"]] = normals[np.arange(n), nearest]
         else:
             obs[:, f["rotor_clearance"]] = CLEARANCE_CAP
             obs[:, f["wall_normal"]] = 0.0
-        obs[:, f["previous_action"]] = self.previous_action
+        obs[:, f["previous_action"]] = self.previous_action[rows]
         obs[:, f["time"]] = (i * self.config.control_dt)[:, None]
         return obs.astype(np.float32)
 
