@@ -20,6 +20,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import time
+
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
@@ -41,6 +43,7 @@ class BatchedVecEnv(VecEnv):
         self._max_steps = self.vector_env.unwrapped.max_episode_steps
         self._actions: np.ndarray | None = None
         self._seeded = False
+        self.step_time_s = 0.0  # time spent in step_wait (for agents.timing.TimeSplit)
         super().__init__(n_envs, self.vector_env.single_observation_space, self.vector_env.single_action_space)
 
     # ------------------------------------------------------------------ stepping
@@ -66,6 +69,7 @@ class BatchedVecEnv(VecEnv):
         self._actions = check_actions(actions, self.num_envs)
 
     def step_wait(self) -> VecEnvStepReturn:
+        start = time.perf_counter()
         batch = self.batch
         reward, terminated, truncated = batch.step(self._actions)
         if self._max_steps is not None:
@@ -85,6 +89,7 @@ class BatchedVecEnv(VecEnv):
                 infos[k] = info
             batch.reset(rows)
             obs[rows] = batch.observations(rows)
+        self.step_time_s += time.perf_counter() - start
         return obs, reward.astype(np.float32), dones, infos
 
     def close(self) -> None:

@@ -286,7 +286,8 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
             model = _make_ppo(config, train_env, out / "tb", verbose)
         start_steps = int(model.num_timesteps)
 
-        eval_env = VecNormalize(make_vec_env(config, 1, 0), training=False, norm_obs=norm["norm_obs"], norm_reward=False,
+        # the same wrappers as the training env (sync_envs_normalization walks both stacks)
+        eval_env = VecNormalize(make_vec_env(config, 1, 0, vector=vector_kind(config)), training=False, norm_obs=norm["norm_obs"], norm_reward=False,
                                 clip_obs=float(norm["clip_obs"]))
         eval_env.seed(int(config["eval"]["seed"]))
         clock = TrainingClock(previous_wall)
@@ -301,7 +302,10 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                 evaluation.evaluations_timesteps = [int(t) for t in history["timesteps"]]
                 evaluation.evaluations_results = [list(r) for r in history["results"]]
                 evaluation.evaluations_length = [list(n) for n in history["ep_lengths"]]
-        callbacks = [evaluation, CollisionLog()]
+        from agents.timing import TimeSplit
+
+        time_split = TimeSplit(venv.unwrapped if hasattr(venv, "unwrapped") else venv)
+        callbacks = [time_split, evaluation, CollisionLog()]
         if int(config["checkpoint_freq"]) > 0:
             callbacks.append(PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks))
         if progress_bar:
@@ -330,6 +334,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         "wall_time_s": round(run_time, 2),
         "total_wall_time_s": round(total_time, 2),
         "steps_per_s": round(steps_this_run / max(run_time, 1e-9), 1),
+        "time_split": time_split.split(),
         "n_envs": config["n_envs"],
         "vector": vector_kind(config),
         "n_workers": config["n_workers"] if vector_kind(config) == "subprocess" else 0,
