@@ -56,6 +56,6 @@ class TimeSplit(BaseCallback):
         parts = {"env_step_s": env_s, "rollout_other_s": max(self.rollout_s - env_s, 0.0),
                  "update_and_callbacks_s": max(total - self.rollout_s, 0.0)}
         out = {k: round(v, 2) for k, v in parts.items()}
-        out.update({k.replace("_s", "_share"): round(v / total, 3) if total > 0 else 0.0 for k, v in parts.items()})
+        out.update({k[:-2] + "_share": round(v / total, 3) if total > 0 else 0.0 for k, v in parts.items()})
         out["total_s"] = round(total, 2)
         return out
