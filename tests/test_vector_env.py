@@ -228,3 +228,27 @@ def test_closed_form_contact_matches_pybullets_query_on_the_same_shapes():
     finally:
         world.close()
     assert compared > 50
+
+
+def test_reset_rotations_in_closed_form_equal_scipys():
+    from wall_env.rotations import euler_xyz_to_quat_rows, quat_to_rotation_rows
+
+    angles = np.random.default_rng(0).uniform(-3, 3, (200, 3))
+    q = euler_xyz_to_quat_rows(angles)
+    reference = Rotation.from_euler("xyz", angles)
+    np.testing.assert_allclose(quat_to_rotation_rows(q), reference.as_matrix(), atol=1e-14)
+    np.testing.assert_allclose(np.abs(np.sum(q * np.roll(reference.as_quat(), 1, axis=1), axis=1)), 1.0, atol=1e-14)
+
+
+def test_streams_draw_uniform_and_normal_numbers_independent_of_the_batch():
+    from wall_env.streams import RandomStreams
+
+    big, one = RandomStreams(1000), RandomStreams(1)
+    big.seed(np.arange(1000), list(range(1000)))
+    one.seed([0], [7])
+    u = big.uniform(slice(None), 4)
+    assert u.min() >= 0.0 and u.max() < 1.0 and abs(u.mean() - 0.5) < 0.01 and abs(u.var() - 1 / 12) < 0.003
+    z = big.normal(slice(None), 4)
+    assert abs(z.mean()) < 0.05 and abs(z.std() - 1.0) < 0.03
+    np.testing.assert_array_equal(one.uniform([0], 4), u[7:8])  # row 7 of the batch = a stream of one seeded 7
+    np.testing.assert_array_equal(one.normal([0], 4), z[7:8])
