@@ -58,6 +58,15 @@ class StateIndex:
     rotor_thrusts = slice(13, 17)
 
 
+def _commanded_rotor_thrusts(vehicle: VehicleParams, omega: ca.SX, u: ca.SX) -> ca.SX:
+    """Rate loop and mixer: rotor thrusts for command ``u`` at body rates ``omega``, clipped to the rotor limits."""
+    J = ca.DM(vehicle.inertia)
+    gyro = ca.cross(omega, J * omega)
+    tau_des = J * ca.DM(vehicle.rate_gains) * (u[1:4] - omega) + gyro
+    f_des = ca.DM(vehicle.mixer_matrix) @ ca.vertcat(u[0], tau_des)
+    return ca.fmin(ca.fmax(f_des, 0.0), vehicle.rotor_thrust_max)
+
+
 def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structure: tuple) -> ca.Function:
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", 4)
@@ -70,12 +79,9 @@ def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structu
     q_unit = q / ca.norm_2(q)
     R = quat_to_rotation(q_unit)
     J = ca.DM(vehicle.inertia)
-    gains = ca.DM(vehicle.rate_gains)
     gyro = ca.cross(omega, J * omega)
 
-    tau_des = J * gains * (u[1:4] - omega) + gyro
-    f_des = ca.DM(vehicle.mixer_matrix) @ ca.vertcat(u[0], tau_des)
-    f_des = ca.fmin(ca.fmax(f_des, 0.0), vehicle.rotor_thrust_max)
+    f_des = _commanded_rotor_thrusts(vehicle, omega, u)
     if vehicle.motor_time_constant > 0:
         f_act = f
         f_dot = (f_des - f) / vehicle.motor_time_constant
@@ -98,7 +104,8 @@ def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structu
     return ca.Function("flight_dynamics", [x, u, mass, theta, scene_vector], [x_dot, forces, f_act])
 
 
-def _rk4_substep(dynamics: ca.Function, h: float, lagged: bool) -> ca.Function:
+def _rk4_substep(dynamics: ca.Function, h: float, vehicle: VehicleParams) -> ca.Function:
+    lagged = vehicle.motor_time_constant > 0
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", 4)
     args = [ca.SX.sym(dynamics.name_in(i), dynamics.sparsity_in(i)) for i in range(2, dynamics.n_in())]
@@ -109,8 +116,8 @@ def _rk4_substep(dynamics: ca.Function, h: float, lagged: bool) -> ca.Function:
     x_next = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     q = x_next[StateIndex.q_body_to_world]
     x_next[StateIndex.q_body_to_world] = q / ca.norm_2(q)
-    if not lagged:  # rotor thrusts are algebraic: report those of the new state
-        x_next[StateIndex.rotor_thrusts] = dynamics(x_next, u, *args)[2]
+    if not lagged:  # rotor thrusts are algebraic: report those of the new state (rate loop and mixer only)
+        x_next[StateIndex.rotor_thrusts] = _commanded_rotor_thrusts(vehicle, x_next[StateIndex.omega_body], u)
     return ca.Function("rk4_substep", [x, u, *args], [x_next, forces])
 
 
@@ -133,7 +140,7 @@ def build_step_function(
 
     model = AeroModel([make_effect(name, **dict(options)) for name, options in structure_key])
     dynamics = _continuous_dynamics(vehicle, model, scene_structure)
-    substep = _rk4_substep(dynamics, control_dt / substeps, vehicle.motor_time_constant > 0)
+    substep = _rk4_substep(dynamics, control_dt / substeps, vehicle)
 
     x = ca.MX.sym("x", STATE_SIZE)
     u = ca.MX.sym("u", 4)
