@@ -31,7 +31,9 @@ def measure_single(env_id: str, steps: int, seed: int = 0) -> dict[str, float]:
     env.reset(seed=seed)
     env.action_space.seed(seed)
     for _ in range(200):  # warm-up: first calls load the compiled dynamics
-        env.step(env.action_space.sample())
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
     env.reset(seed=seed)
     reset_times = []
     start = time.perf_counter()
