@@ -228,6 +228,8 @@ def run_batched(args) -> int:
 
         fig, ax = plt.subplots(figsize=(6, 4))
         ax.loglog([r["n"] for r in rows], [r["steps_per_s"] for r in rows], "o-", label="batched env, 1 process")
+        ax.loglog([r["n"] for r in rows], [r["steps_per_cpu_s"] for r in rows], "o--", color="tab:blue", alpha=0.5,
+                  label="batched env, per CPU-second")
         ax.axhline(single, color="grey", linestyle="--", label="single env (gym.make)")
         if two:
             ax.plot([two["n_per_process"]], [two["steps_per_s"]], "s", label="2 processes")
