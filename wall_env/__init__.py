@@ -20,8 +20,8 @@ from gymnasium.envs.registration import register, registry
 
 from wall_env.actions import ActionMapping
 from wall_env.aero import AeroModel
-from wall_env.effects import EFFECTS, Effect, effects_from_spec, make_effect
 from wall_env.config import MAX_EPISODE_STEPS, EnvConfig
+from wall_env.effects import EFFECTS, Effect, effects_from_spec, make_effect
 from wall_env.env import DEFAULT_REWARD_WEIGHTS, WallInspectorEnv
 from wall_env.model_file import FlightModel, nominal_aero_model
 from wall_env.observation import OBSERVATION_FIELDS, parse_observation

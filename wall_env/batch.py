@@ -231,7 +231,7 @@ class EnvBatch:
         i = self.step_index[rows]
         n = x.shape[0]
         offset = self.ref_offset[rows]
-        obs = np.empty((n, OBSERVATION_SIZE))
+        obs = np.empty((n, OBSERVATION_SIZE), dtype=np.float32)
         p_ref = self._ref_p[i]
         obs[:, f["p_world"]] = x[:, StateIndex.p_world]
         obs[:, f["v_world"]] = x[:, StateIndex.v_world]
@@ -252,7 +252,7 @@ class EnvBatch:
             obs[:, f["wall_normal"]] = 0.0
         obs[:, f["previous_action"]] = self.previous_action[rows]
         obs[:, f["time"]] = (i * self.config.control_dt)[:, None]
-        return obs.astype(np.float32)
+        return obs
 
     def infos(self) -> dict[str, Any]:
         """The info of every row as arrays (keys: see :mod:`wall_env.env`)."""
