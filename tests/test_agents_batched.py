@@ -92,3 +92,22 @@ def test_a_controllers_predict_takes_a_batch_of_observations_from_the_batched_en
     assert not ended.any()
     env.close()
     venv.close()
+
+
+def test_train_uses_the_batched_env_by_default_and_its_card_splits_the_time(tmp_path):
+    from agents.train import train
+
+    config = default_config("WallHover")
+    assert config["vector"] == "batched"
+    config.update(timesteps=2048, n_envs=16, checkpoint_freq=0)
+    config["ppo"].update(n_steps=64, batch_size=512, n_epochs=1)
+    config["eval"].update(freq=100_000, episodes=1)
+    config["card_eval"]["episodes"] = 1
+    card = train(config, tmp_path / "hover", progress_bar=False, verbose=0).card
+    training = card["training"]
+    assert training["vector"] == "batched" and training["total_timesteps"] >= 2048
+    split = training["time_split"]
+    parts = split["env_step_s"] + split["rollout_other_s"] + split["update_and_callbacks_s"]
+    assert split["env_step_s"] > 0 and parts == pytest.approx(split["total_s"], abs=0.05)
+    assert split["env_step_share"] + split["rollout_other_share"] + split["update_and_callbacks_share"] == \
+        pytest.approx(1.0, abs=0.01)
