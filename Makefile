@@ -1,6 +1,6 @@
 # Wall Inspector: two commands on a fresh machine.
 #   make demo   installs everything into .venv and flies a short rollout (prints a summary, writes a picture)
-#   make test   installs everything into .venv and runs the test suite
+#   make test   installs everything into .venv, lints (ruff), type-checks (mypy) and runs the test suite
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -16,7 +16,7 @@ $(BIN)/python:
 # an unpinned torch would pull a multi-GB CUDA build.
 $(VENV)/.installed: pyproject.toml $(BIN)/python
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(BIN)/python -m pip install --quiet -e ".[notebooks,test]"
 	touch $@
 
 install: $(VENV)/.installed
@@ -24,7 +24,10 @@ install: $(VENV)/.installed
 demo: install
 	$(BIN)/wall-inspector demo --out $(OUT)
 
+# lint, type check, then the test suite (settings in pyproject.toml)
 test: install
+	$(BIN)/ruff check .
+	$(BIN)/mypy
 	$(BIN)/python -m pytest -q
 
 clean:

@@ -2,7 +2,9 @@
 
 ``wall-inspector train`` (:mod:`agents.train`) trains one; :func:`load_policy` loads a
 checkpoint folder or a shipped agent by task name and returns an object with
-Stable-Baselines3-style ``predict``; :func:`policy_factory` gives the ``env -> policy``
+Stable-Baselines3-style ``predict``. A checkpoint folder holds Stable-Baselines3's own
+files (``model.zip`` and ``vecnormalize.pkl``, loadable with ``PPO.load`` and
+``VecNormalize.load`` alone) plus ``policy.json``; :func:`policy_factory` gives the ``env -> policy``
 function the comparison tables take.
 
 Modules: :mod:`agents.config` (per-task YAML in ``agents/configs/``),
@@ -14,6 +16,7 @@ Importing this package does not import PyTorch; loading a policy does.
 """
 
 from agents.checkpoints import CheckpointError, CheckpointNotFoundError
-from agents.policy import TrainedPolicy, load_policy, policy_factory, pretrained_path
+from agents.policy import TaskMismatchError, TrainedPolicy, load_policy, policy_factory, pretrained_path
 
-__all__ = ["load_policy", "policy_factory", "pretrained_path", "TrainedPolicy", "CheckpointError", "CheckpointNotFoundError"]
+__all__ = ["CheckpointError", "CheckpointNotFoundError", "TaskMismatchError", "TrainedPolicy", "load_policy",
+           "policy_factory", "pretrained_path"]

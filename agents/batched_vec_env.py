@@ -17,10 +17,9 @@ the full info for every env would cost more than the step.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from typing import Any
-
-import time
 
 import gymnasium as gym
 import numpy as np
@@ -29,6 +28,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices,
 import wall_env  # noqa: F401  (registers the tasks)
 from wall_env.batch import check_actions
 from wall_env.env import check_reset_options
+from wall_env.vector_env import WallInspectorVectorEnv
 
 __all__ = ["BatchedVecEnv"]
 
@@ -37,10 +37,13 @@ class BatchedVecEnv(VecEnv):
     """``n_envs`` rows of the batched env ``env_id`` (built with ``env_kwargs``) as an SB3 ``VecEnv``."""
 
     def __init__(self, env_id: str, n_envs: int, info_keys: Sequence[str] = ("collisions",), **env_kwargs: Any):
-        self.vector_env = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", **env_kwargs)
-        self.batch = self.vector_env.unwrapped.batch
+        vector_env = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", **env_kwargs)
+        if not isinstance(vector_env, WallInspectorVectorEnv):
+            raise ValueError(f"{env_id} is not a Wall Inspector task (its vector env is {type(vector_env).__name__})")
+        self.vector_env = vector_env
+        self.batch = vector_env.batch
         self.info_keys = tuple(info_keys)
-        self._max_steps = self.vector_env.unwrapped.max_episode_steps
+        self._max_steps = vector_env.max_episode_steps
         self._actions: np.ndarray | None = None
         self._seeded = False
         self.step_time_s = 0.0  # time spent in step_wait (for agents.timing.TimeSplit)
@@ -70,6 +73,8 @@ class BatchedVecEnv(VecEnv):
 
     def step_wait(self) -> VecEnvStepReturn:
         start = time.perf_counter()
+        if self._actions is None:
+            raise RuntimeError("step_wait() without step_async(): call step(actions)")
         batch = self.batch
         reward, terminated, truncated = batch.step(self._actions)
         if self._max_steps is not None:

@@ -1,4 +1,5 @@
-"""Training callbacks: progress bar, periodic checkpoints, saving the best model.
+"""Training callbacks: progress bar, periodic checkpoints (by env steps and by wall time),
+saving the best model.
 
 Each checkpoint is written with :func:`agents.checkpoints.save_checkpoint`, so the
 normalisation statistics always travel with the model and every checkpoint (periodic,
@@ -42,7 +43,7 @@ class ProgressBar(BaseCallback):
     def __init__(self, total_timesteps: int, initial: int = 0):
         super().__init__()
         self.total, self.initial = int(total_timesteps), int(initial)
-        self.bar = None
+        self.bar: Any = None
 
     def _on_training_start(self) -> None:
         from tqdm.auto import tqdm
@@ -51,7 +52,8 @@ class ProgressBar(BaseCallback):
                         desc="PPO")
 
     def _on_step(self) -> bool:
-        self.bar.update(self.training_env.num_envs)
+        if self.bar is not None:
+            self.bar.update(self.training_env.num_envs)
         return True
 
     def _on_training_end(self) -> None:
@@ -64,24 +66,42 @@ def _policy_info(model, clock: TrainingClock, base_info: dict[str, Any], **extra
 
 
 class PeriodicCheckpoint(BaseCallback):
-    """Every ``every`` env steps, save a checkpoint into ``folder/<steps>/``."""
+    """Save a checkpoint into ``folder/<steps>/`` every ``every`` env steps and whenever
+    ``every_s`` seconds of wall time have passed since the last one (0 turns either off),
+    so that a long run loses little however it ends."""
 
     def __init__(self, folder: Path, every: int, policy_info: dict[str, Any], clock: TrainingClock,
-                 check_observations: np.ndarray):
+                 check_observations: np.ndarray, every_s: float = 0.0):
         super().__init__()
-        self.folder, self.every = Path(folder), int(every)
+        self.folder, self.every, self.every_s = Path(folder), int(every), float(every_s)
         self.policy_info, self.clock, self.check_observations = policy_info, clock, check_observations
-        self._next = None
+        self._next_steps = 0
+        self._last_save = 0.0
+        self.saved: list[Path] = []
 
     def _on_training_start(self) -> None:
-        self._next = (self.model.num_timesteps // self.every + 1) * self.every
+        if self.every > 0:
+            self._next_steps = (self.model.num_timesteps // self.every + 1) * self.every
+        self._last_save = time.perf_counter()
 
     def _on_step(self) -> bool:
-        if self.model.num_timesteps >= self._next:
-            save_checkpoint(self.folder / f"{self.model.num_timesteps:09d}", self.model, self.model.get_vec_normalize_env(),
-                            _policy_info(self.model, self.clock, self.policy_info), self.check_observations)
-            self._next += self.every
+        by_steps = self.every > 0 and self.model.num_timesteps >= self._next_steps
+        by_time = self.every_s > 0 and time.perf_counter() - self._last_save >= self.every_s
+        if by_steps or by_time:
+            self.save()
+            while self.every > 0 and self._next_steps <= self.model.num_timesteps:
+                self._next_steps += self.every
         return True
+
+    def save(self) -> Path:
+        """Write a checkpoint now, into ``folder/<steps>/``."""
+        folder = self.folder / f"{self.model.num_timesteps:09d}"
+        vec_normalize = self.model.get_vec_normalize_env()
+        save_checkpoint(folder, self.model, vec_normalize, _policy_info(self.model, self.clock, self.policy_info),
+                        self.check_observations)
+        self._last_save = time.perf_counter()
+        self.saved.append(folder)
+        return folder
 
 
 class SaveBestCheckpoint(BaseCallback):
@@ -95,7 +115,7 @@ class SaveBestCheckpoint(BaseCallback):
         self.on_save = on_save
 
     def _on_step(self) -> bool:
-        best = float(self.parent.best_mean_reward)
+        best = float(getattr(self.parent, "best_mean_reward", np.nan))
         save_checkpoint(self.folder, self.model, self.model.get_vec_normalize_env(),
                         _policy_info(self.model, self.clock, self.policy_info, eval_mean_return=best),
                         self.check_observations)
@@ -112,7 +132,7 @@ class CollisionLog(BaseCallback):
         return True
 
     def _on_rollout_end(self) -> None:
-        counts = [info["collisions"] for info in self.model.ep_info_buffer if "collisions" in info]
+        counts = [info["collisions"] for info in self.model.ep_info_buffer or () if "collisions" in info]
         if counts:
             self.logger.record("rollout/collisions_per_episode", float(np.mean(counts)))
             self.logger.record("rollout/collision_episode_fraction", float(np.mean(np.asarray(counts) > 0)))

@@ -1,36 +1,43 @@
 """Saving and loading trained agents, and their model cards.
 
-A checkpoint is a folder with three files:
+A checkpoint is a folder that Stable-Baselines3 alone can load::
+
+    model = PPO.load("agents/pretrained/wall_sweep/model.zip")
+    env = VecNormalize.load("agents/pretrained/wall_sweep/vecnormalize.pkl", make_vec_env("WallInspector/WallSweep-v0"))
 
 ``model.zip``
-    the Stable-Baselines3 PPO model (network weights, optimiser, hyperparameters).
-``normalization.json``
-    the ``VecNormalize`` statistics the policy was trained with: observation running
-    mean/variance/count, the return statistics that scale rewards, ``clip_obs``,
-    ``clip_reward``, ``epsilon``, ``gamma``. JSON rather than a pickle, so that the
-    file is readable, small, safe to load and independent of library versions; floats
-    round-trip exactly.
+    the Stable-Baselines3 PPO model (network weights, optimiser state, hyperparameters,
+    step count).
+``vecnormalize.pkl``
+    the ``VecNormalize`` the policy was trained with, written by ``VecNormalize.save``:
+    observation running mean/variance/count, the return statistics that scale rewards,
+    ``clip_obs``, ``epsilon``, ``gamma``. It is saved in evaluation mode
+    (``training=False``, ``norm_reward=False``), so the environment from
+    ``VecNormalize.load`` normalises observations with the frozen statistics and returns
+    raw rewards; resuming training switches both back on.
 ``policy.json``
-    what the policy is: environment id, observation size, the residual base controller
-    (if any) and its correction scale, and a *check*: a few observations and the
-    deterministic actions the in-memory model gave for them when it was saved. Loading
-    recomputes those actions and refuses a checkpoint whose model and statistics do
-    not reproduce them (mismatched or damaged files).
+    what the policy is: environment id, step count, the residual base controller (if any)
+    and its correction scale, and a *check*: a few observations and the deterministic
+    actions the in-memory model gave for them when it was saved. Loading recomputes
+    those actions and refuses a checkpoint whose model and statistics do not reproduce
+    them (mismatched or damaged files).
 
 A training run's folder holds the final checkpoint at its top level, the best one
-(by the evaluation callback) in ``best/``, periodic ones in ``checkpoints/<steps>/``,
-plus ``config.yaml``, TensorBoard logs in ``tb/`` and the model card
-(``model_card.json`` and ``model_card.md``).
+(by the evaluation callback) in ``best/``, periodic and interrupted ones in
+``checkpoints/<steps>/``, plus ``config.yaml``, TensorBoard logs in ``tb/`` and the model
+card (``model_card.json`` and ``model_card.md``).
 
 Every failure to load names the file: :class:`CheckpointNotFoundError` (also a
 ``FileNotFoundError``) for a missing file, :class:`CheckpointError` for one that is
-unreadable or inconsistent.
+unreadable or inconsistent. Like any pickle, ``vecnormalize.pkl`` should only be loaded
+from a source you trust.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import pickle
 import shutil
 import zipfile
 from pathlib import Path
@@ -40,27 +47,29 @@ import numpy as np
 
 __all__ = [
     "MODEL_FILE",
-    "NORMALIZATION_FILE",
     "POLICY_FILE",
+    "VECNORMALIZE_FILE",
     "CheckpointError",
     "CheckpointNotFoundError",
-    "normalization_state",
-    "restore_normalization",
-    "normalize_observation",
-    "save_checkpoint",
-    "read_json",
-    "load_model",
     "checkpoint_files",
-    "write_model_card",
     "copy_checkpoint",
+    "load_model",
+    "read_json",
+    "read_vecnormalize",
+    "save_checkpoint",
+    "save_vecnormalize",
+    "upgrade_checkpoint",
+    "vecnormalize_from_json",
+    "write_model_card",
 ]
 
 MODEL_FILE = "model.zip"
-NORMALIZATION_FILE = "normalization.json"
+VECNORMALIZE_FILE = "vecnormalize.pkl"
 POLICY_FILE = "policy.json"
+LEGACY_NORMALIZATION_FILE = "normalization.json"  # earlier format: the statistics as JSON
 CARD_JSON = "model_card.json"
 CARD_MD = "model_card.md"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
 
 class CheckpointError(RuntimeError):
@@ -72,61 +81,84 @@ class CheckpointNotFoundError(CheckpointError, FileNotFoundError):
 
 
 # ---------------------------------------------------------------------- normalisation statistics
-def normalization_state(vec_normalize) -> dict[str, Any]:
-    """The statistics of a ``VecNormalize`` as a JSON-ready dict."""
-    return {
-        "format": FORMAT_VERSION,
-        "norm_obs": bool(vec_normalize.norm_obs),
-        "norm_reward": bool(vec_normalize.norm_reward),
-        "clip_obs": float(vec_normalize.clip_obs),
-        "clip_reward": float(vec_normalize.clip_reward),
-        "epsilon": float(vec_normalize.epsilon),
-        "gamma": float(vec_normalize.gamma),
-        "obs_mean": vec_normalize.obs_rms.mean.tolist(),
-        "obs_var": vec_normalize.obs_rms.var.tolist(),
-        "obs_count": float(vec_normalize.obs_rms.count),
-        "ret_mean": float(vec_normalize.ret_rms.mean),
-        "ret_var": float(vec_normalize.ret_rms.var),
-        "ret_count": float(vec_normalize.ret_rms.count),
-    }
+def save_vecnormalize(vec_normalize: Any, path: str | Path) -> None:
+    """``VecNormalize.save`` in evaluation mode (``training`` and ``norm_reward`` off in
+    the file); ``vec_normalize`` itself is left as it was."""
+    training, norm_reward = vec_normalize.training, vec_normalize.norm_reward
+    vec_normalize.training, vec_normalize.norm_reward = False, False
+    try:
+        vec_normalize.save(str(path))
+    finally:
+        vec_normalize.training, vec_normalize.norm_reward = training, norm_reward
 
 
-def restore_normalization(vec_normalize, state: dict[str, Any]) -> None:
-    """Put saved statistics into a ``VecNormalize`` (e.g. to resume training)."""
-    vec_normalize.norm_obs = state["norm_obs"]
-    vec_normalize.norm_reward = state["norm_reward"]
-    vec_normalize.clip_obs = state["clip_obs"]
-    vec_normalize.clip_reward = state["clip_reward"]
-    vec_normalize.epsilon = state["epsilon"]
-    vec_normalize.gamma = state["gamma"]
-    vec_normalize.obs_rms.mean = np.asarray(state["obs_mean"], dtype=np.float64)
-    vec_normalize.obs_rms.var = np.asarray(state["obs_var"], dtype=np.float64)
-    vec_normalize.obs_rms.count = state["obs_count"]
-    vec_normalize.ret_rms.mean = np.float64(state["ret_mean"])
-    vec_normalize.ret_rms.var = np.float64(state["ret_var"])
-    vec_normalize.ret_rms.count = state["ret_count"]
+def read_vecnormalize(path: str | Path) -> Any:
+    """The ``VecNormalize`` saved at ``path``, without an environment attached.
 
+    It can normalise observations (``normalize_obs``) but not step; ``VecNormalize.load``
+    attaches an environment. Raises :class:`CheckpointNotFoundError` / :class:`CheckpointError`.
+    """
+    from stable_baselines3.common.vec_env import VecNormalize
 
-def normalize_observation(state: dict[str, Any], obs: np.ndarray) -> np.ndarray:
-    """The observation the network sees: ``clip((obs - mean) / sqrt(var + eps), +-clip_obs)``,
-    float32, exactly as ``VecNormalize.normalize_obs`` computes it."""
-    obs = np.asarray(obs, dtype=np.float32)
-    if not state["norm_obs"]:
-        return obs
-    mean, var = state["_mean"], state["_var"]
-    out = np.clip((obs - mean) / np.sqrt(var + state["epsilon"]), -state["clip_obs"], state["clip_obs"])
-    return out.astype(np.float32)
-
-
-def _check_normalization(state: Any, path: Path) -> dict[str, Any]:
-    required = ("norm_obs", "clip_obs", "epsilon", "obs_mean", "obs_var")
-    if not isinstance(state, dict) or any(k not in state for k in required):
-        raise CheckpointError(f"{path}: not a normalisation file (needs keys {list(required)})")
-    mean = np.asarray(state["obs_mean"], dtype=np.float64)
-    var = np.asarray(state["obs_var"], dtype=np.float64)
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            loaded: Any = pickle.load(handle)
+    except FileNotFoundError:
+        raise CheckpointNotFoundError(f"checkpoint file {path} does not exist") from None
+    except Exception as exc:  # noqa: BLE001 - any unpickling failure means the file is unusable
+        raise CheckpointError(f"{path}: corrupted or not a VecNormalize pickle ({type(exc).__name__}: {exc})") from None
+    if not isinstance(loaded, VecNormalize):
+        raise CheckpointError(f"{path}: not a VecNormalize pickle (holds a {type(loaded).__name__})")
+    obs_rms: Any = loaded.obs_rms
+    mean, var = np.asarray(obs_rms.mean), np.asarray(obs_rms.var)
     if mean.ndim != 1 or mean.shape != var.shape or not np.all(np.isfinite(mean)) or not np.all(var >= 0):
         raise CheckpointError(f"{path}: observation statistics are malformed (mean shape {mean.shape}, var shape {var.shape})")
-    return {**state, "_mean": mean, "_var": var}
+    return loaded
+
+
+def vecnormalize_from_json(state: dict[str, Any], observation_space: Any, action_space: Any) -> Any:
+    """A ``VecNormalize`` in evaluation mode holding statistics that the earlier checkpoint
+    format saved as JSON (``normalization.json``); see :func:`upgrade_checkpoint`."""
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    class SpacesOnly(gym.Env):
+        """Only the spaces: enough to build, save and normalise with a VecNormalize."""
+
+        def __init__(self) -> None:
+            self.observation_space, self.action_space = observation_space, action_space
+
+    vec: Any = VecNormalize(DummyVecEnv([SpacesOnly]), training=False, norm_obs=bool(state["norm_obs"]), norm_reward=False,
+                       clip_obs=float(state["clip_obs"]), clip_reward=float(state["clip_reward"]),
+                       gamma=float(state["gamma"]), epsilon=float(state["epsilon"]))
+    vec.obs_rms.mean = np.asarray(state["obs_mean"], dtype=np.float64)
+    vec.obs_rms.var = np.asarray(state["obs_var"], dtype=np.float64)
+    vec.obs_rms.count = float(state["obs_count"])
+    vec.ret_rms.mean = np.float64(state["ret_mean"])
+    vec.ret_rms.var = np.float64(state["ret_var"])
+    vec.ret_rms.count = float(state["ret_count"])
+    return vec
+
+
+def upgrade_checkpoint(folder: str | Path) -> Path:
+    """Write ``vecnormalize.pkl`` into a checkpoint folder of the earlier format, from its
+    ``normalization.json`` (nothing else is changed); returns the new file's path.
+
+    The statistics are copied exactly, so the policy acts as before: the actions recorded
+    in ``policy.json`` are checked on the result.
+    """
+    from stable_baselines3 import PPO
+
+    folder = Path(folder)
+    state = read_json(folder / LEGACY_NORMALIZATION_FILE)
+    model = PPO.load(folder / MODEL_FILE, device="cpu")
+    vec = vecnormalize_from_json(state, model.observation_space, model.action_space)
+    target = folder / VECNORMALIZE_FILE
+    save_vecnormalize(vec, target)
+    vec.close()
+    load_model(folder)  # the recorded actions must be reproduced
+    return target
 
 
 # ---------------------------------------------------------------------- files
@@ -145,13 +177,19 @@ def checkpoint_files(folder: str | Path) -> dict[str, Path]:
     if not folder.exists():
         raise CheckpointNotFoundError(f"checkpoint folder {folder} does not exist")
     if not folder.is_dir():
-        raise CheckpointError(f"{folder} is not a checkpoint folder (expected {MODEL_FILE}, {NORMALIZATION_FILE}, {POLICY_FILE})")
-    return {"model": folder / MODEL_FILE, "normalization": folder / NORMALIZATION_FILE, "policy": folder / POLICY_FILE}
+        raise CheckpointError(f"{folder} is not a checkpoint folder (expected {MODEL_FILE}, {VECNORMALIZE_FILE}, "
+                              f"{POLICY_FILE})")
+    return {"model": folder / MODEL_FILE, "normalization": folder / VECNORMALIZE_FILE, "policy": folder / POLICY_FILE}
 
 
-def save_checkpoint(folder: str | Path, model, vec_normalize, policy_info: dict[str, Any],
+def _check_actions(model: Any, vec_normalize: Any, observations: np.ndarray) -> np.ndarray:
+    actions, _ = model.predict(vec_normalize.normalize_obs(np.asarray(observations, dtype=np.float32)), deterministic=True)
+    return np.asarray(actions, dtype=np.float64)
+
+
+def save_checkpoint(folder: str | Path, model: Any, vec_normalize: Any, policy_info: dict[str, Any],
                     check_observations: np.ndarray | None = None) -> Path:
-    """Write ``model.zip``, ``normalization.json`` and ``policy.json`` into ``folder``.
+    """Write ``model.zip``, ``vecnormalize.pkl`` and ``policy.json`` into ``folder``.
 
     ``check_observations`` (raw, un-normalised, ``(n, obs_size)``) are stored with the
     deterministic actions the model gives for them now, for :func:`load_model` to verify.
@@ -159,57 +197,61 @@ def save_checkpoint(folder: str | Path, model, vec_normalize, policy_info: dict[
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     model.save(folder / MODEL_FILE)
-    state = normalization_state(vec_normalize)
-    (folder / NORMALIZATION_FILE).write_text(json.dumps(state))
+    save_vecnormalize(vec_normalize, folder / VECNORMALIZE_FILE)
     info = {"format": FORMAT_VERSION, **policy_info}
     if check_observations is not None and len(check_observations):
         obs = np.asarray(check_observations, dtype=np.float32)
-        normalized = normalize_observation(_check_normalization(state, folder / NORMALIZATION_FILE), obs)
-        actions, _ = model.predict(normalized, deterministic=True)
-        info["check"] = {"observations": obs.tolist(), "actions": np.asarray(actions, dtype=np.float64).tolist()}
+        info["check"] = {"observations": obs.tolist(), "actions": _check_actions(model, vec_normalize, obs).tolist()}
     (folder / POLICY_FILE).write_text(json.dumps(info, indent=1))
     return folder
 
 
-def load_model(folder: str | Path, verify: bool = True):
-    """Load a checkpoint folder: ``(model, normalization_state, policy_info)``.
+def load_model(folder: str | Path, verify: bool = True) -> tuple[Any, Any, dict[str, Any]]:
+    """Load a checkpoint folder: ``(model, vec_normalize, policy_info)``.
 
+    ``vec_normalize`` has no environment attached (see :func:`read_vecnormalize`).
     Raises :class:`CheckpointNotFoundError` or :class:`CheckpointError` naming the file.
     """
     from stable_baselines3 import PPO
 
     files = checkpoint_files(folder)
+    if not files["normalization"].is_file() and (Path(folder) / LEGACY_NORMALIZATION_FILE).is_file():
+        raise CheckpointError(f"{folder} is a checkpoint of the earlier format ({LEGACY_NORMALIZATION_FILE}, no "
+                              f"{VECNORMALIZE_FILE}); convert it once with: python -c \"from agents.checkpoints import "
+                              f"upgrade_checkpoint; upgrade_checkpoint('{folder}')\"")
     for path in files.values():
         if not path.is_file():
             raise CheckpointNotFoundError(f"checkpoint file {path} does not exist")
     info = read_json(files["policy"])
     if not isinstance(info, dict) or "env_id" not in info:
         raise CheckpointError(f"{files['policy']}: not a policy description (no env_id)")
-    state = _check_normalization(read_json(files["normalization"]), files["normalization"])
+    vec_normalize = read_vecnormalize(files["normalization"])
     if not zipfile.is_zipfile(files["model"]):
         raise CheckpointError(f"{files['model']}: corrupted or not a Stable-Baselines3 model archive (not a zip file)")
     try:
         model = PPO.load(files["model"], device="cpu")
-    except Exception as exc:  # noqa: BLE001 - any failure here means the file is unusable
-        raise CheckpointError(f"{files['model']}: corrupted or not a Stable-Baselines3 PPO model ({type(exc).__name__}: {exc})") from exc
-    obs_size = int(np.prod(model.observation_space.shape))
-    if state["_mean"].shape != (obs_size,):
-        raise CheckpointError(f"{files['normalization']}: statistics for {state['_mean'].shape[0]} observation entries, "
+    except Exception as exc:
+        raise CheckpointError(f"{files['model']}: corrupted or not a Stable-Baselines3 PPO model "
+                              f"({type(exc).__name__}: {exc})") from exc
+    obs_size = int(np.prod(model.observation_space.shape or ()))
+    stats_size = int(np.prod(np.shape(vec_normalize.obs_rms.mean)))
+    if stats_size != obs_size:
+        raise CheckpointError(f"{files['normalization']}: statistics for {stats_size} observation entries, "
                               f"but {files['model']} expects {obs_size}")
     if verify and "check" in info:
         obs = np.asarray(info["check"]["observations"], dtype=np.float32)
         expected = np.asarray(info["check"]["actions"], dtype=np.float64)
-        actions, _ = model.predict(normalize_observation(state, obs), deterministic=True)
+        actions = _check_actions(model, vec_normalize, obs)
         if not np.allclose(actions, expected, rtol=1e-5, atol=1e-6):
-            worst = float(np.max(np.abs(np.asarray(actions) - expected)))
+            worst = float(np.max(np.abs(actions - expected)))
             raise CheckpointError(f"{files['model']} with {files['normalization']} does not reproduce the actions recorded "
                                   f"in {files['policy']} (largest difference {worst:.3g}): the files do not belong together "
                                   "or one is damaged")
-    return model, state, info
+    return model, vec_normalize, info
 
 
 def copy_checkpoint(source: str | Path, target: str | Path, extra_files: tuple[str, ...] = ()) -> Path:
-    """Copy a checkpoint folder's files (and ``extra_files`` from ``source``'s parent, if present)."""
+    """Copy a checkpoint folder's files (and ``extra_files`` from ``source`` or its parent, if present)."""
     files = checkpoint_files(source)
     target = Path(target)
     target.mkdir(parents=True, exist_ok=True)
@@ -234,6 +276,17 @@ def _fmt(value: Any) -> str:
             return "n/a"
         return f"{value:.4g}"
     return str(value)
+
+
+def _git_text(training: dict[str, Any]) -> str | None:
+    """The commit the run started from, and what differed from it (``git_uncommitted``: a
+    list of files, or a sentence for cards that could only say that something did)."""
+    commit, uncommitted = training.get("git_commit"), training.get("git_uncommitted")
+    if not commit or not uncommitted:
+        return commit
+    if isinstance(uncommitted, str):
+        return f"{commit} plus uncommitted changes: {uncommitted}"
+    return f"{commit} plus uncommitted changes to {', '.join(uncommitted)}"
 
 
 def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Path]:
@@ -269,7 +322,7 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
         ("domain randomisation", card.get("randomize") or "off"),
         ("seed", training.get("seed")),
         ("machine", training.get("machine")),
-        ("git commit", training.get("git_commit")),
+        ("git commit", _git_text(training)),
         ("checkpoint evaluated below (the one to ship)", card.get("checkpoint")),
     ]
     lines += [f"| {name} | {_fmt(value)} |" for name, value in rows]

@@ -47,7 +47,7 @@ _BASE: dict[str, Any] = {
     "residual_scale": [0.2, 0.2, 0.2, 0.2],  # largest correction per normalised action entry
     # keywords for each base controller's from_env: SC-MPC is given the paper's identified
     # suction model (it is the controller's knowledge, not the simulator's truth)
-    "residual_base_kwargs": {"pid": {}, "scmpc": {"k_s": 4.1, "d_thr": 0.132}},
+    "residual_base_kwargs": {"pid": {"preset": "tuned"}, "scmpc": {"k_s": 4.1, "d_thr": 0.132, "preset": "tuned"}},
     "timesteps": 1_000_000,
     "seed": 0,
     "n_envs": 32,  # environments in the vector env (16 per worker: IPC and SB3 overhead amortised)
@@ -77,11 +77,14 @@ _BASE: dict[str, Any] = {
     },
     "normalize": {"norm_obs": True, "norm_reward": True, "clip_obs": 10.0, "clip_reward": 10.0},
     "eval": {"freq": 100_000, "episodes": 5, "seed": 10_000},  # freq in env steps
-    "checkpoint_freq": 250_000,  # env steps; 0 turns checkpoints off
+    "checkpoint_freq": 250_000,  # env steps; 0 turns checkpoints by steps off
+    "checkpoint_minutes": 10.0,  # wall time between checkpoints as well; 0 turns checkpoints by time off
     "card_eval": {"episodes": 10, "seed": 0},  # final evaluation written to the model card
 }
 
 _ACTIVATIONS = ("tanh", "relu", "elu")
+# sections whose entries are free-form (keywords of the env or of a base controller, ranges by name)
+_OPEN_SECTIONS = ("env_kwargs", "randomize_ranges", "residual_base_kwargs")
 _RESIDUAL_BASES = (None, "pid", "scmpc")
 
 
@@ -130,24 +133,58 @@ def apply_overrides(config: dict[str, Any], overrides: list[str]) -> dict[str, A
             if not isinstance(node.get(part), dict):
                 raise ValueError(f"override {item!r}: {part!r} is not a section of the configuration")
             node = node[part]
-        if parts[-1] not in node and node is config:
-            raise ValueError(f"override {item!r}: unknown key {parts[-1]!r}; allowed: {sorted(config)}")
-        node[parts[-1]] = yaml.safe_load(raw)
+        if parts[-1] not in node and (node is config or parts[0] not in _OPEN_SECTIONS):
+            raise ValueError(f"override {item!r}: unknown key {parts[-1]!r}; allowed: {sorted(node)}")
+        try:
+            value = yaml.safe_load(raw)
+        except yaml.YAMLError as exc:
+            raise ValueError(f"override {item!r}: the value is not valid YAML ({str(exc).splitlines()[0]})") from None
+        if isinstance(node.get(parts[-1]), dict) and (node is not config or parts[-1] not in _OPEN_SECTIONS):
+            if not isinstance(value, dict):  # a section: its entries change, one by one
+                raise ValueError(f"override {item!r}: {key.strip()} is a section; set its entries as "
+                                 f"{key.strip()}.KEY=VALUE or give a mapping")
+            value = _merge(node[parts[-1]], value)
+        node[parts[-1]] = value
     return validate_config(config)
 
 
 def validate_config(config: dict[str, Any]) -> dict[str, Any]:
     """Check types and ranges; return ``config`` (normalised in place) or raise ``ValueError``."""
-    if config.get("env_id") is not None:
-        config["env_id"] = task_env_id(config["env_id"])
+    if config.get("env_id") is None:
+        raise ValueError("env_id is not set: name the task (--env, or env_id in the configuration file)")
+    if not isinstance(config["env_id"], str):
+        raise ValueError(f"env_id must be a task name such as WallInspector/WallSweep-v0, got {config['env_id']!r}")
+    config["env_id"] = task_env_id(config["env_id"])
 
     def positive_int(name: str, value: Any) -> int:
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
         return value
 
+    for section, allowed in _BASE.items():
+        if isinstance(allowed, dict) and section not in _OPEN_SECTIONS:
+            if not isinstance(config.get(section), dict):
+                raise ValueError(f"{section} must be a mapping, got {config.get(section)!r}")
+            unknown = sorted(set(config[section]) - set(allowed))
+            if unknown:
+                raise ValueError(f"{section}: unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+            missing = sorted(set(allowed) - set(config[section]))
+            if missing:
+                raise ValueError(f"{section}: missing key(s) {missing}")
+
+    def number(name: str, value: Any, low: float, high: float = float("inf"), low_open: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+            raise ValueError(f"{name} must be a number, got {value!r}")
+        if value < low or value > high or (low_open and value == low):
+            raise ValueError(f"{name} must be in {'(' if low_open else '['}{low}, {high}], got {value!r}")
+        return float(value)
+
     for key in ("timesteps", "n_envs", "n_workers", "torch_threads"):
         positive_int(key, config[key])
+    if isinstance(config["checkpoint_freq"], bool) or not isinstance(config["checkpoint_freq"], int) \
+            or config["checkpoint_freq"] < 0:
+        raise ValueError(f"checkpoint_freq must be a whole number of env steps >= 0, got {config['checkpoint_freq']!r}")
+    number("checkpoint_minutes", config["checkpoint_minutes"], 0.0)
     if config["n_workers"] > config["n_envs"]:
         raise ValueError(f"n_workers ({config['n_workers']}) must not exceed n_envs ({config['n_envs']})")
     if not isinstance(config["seed"], int):
@@ -157,10 +194,22 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
         positive_int(f"ppo.{key}", ppo[key])
     if ppo["n_steps"] * config["n_envs"] < 2:
         raise ValueError("ppo.n_steps * n_envs must be at least 2")
-    if not 0.0 < float(ppo["gamma"]) <= 1.0 or not 0.0 <= float(ppo["gae_lambda"]) <= 1.0:
-        raise ValueError(f"ppo.gamma must be in (0, 1] and ppo.gae_lambda in [0, 1], got {ppo['gamma']}, {ppo['gae_lambda']}")
-    if not float(ppo["learning_rate"]) > 0:
-        raise ValueError(f"ppo.learning_rate must be positive, got {ppo['learning_rate']!r}")
+    number("ppo.gamma", ppo["gamma"], 0.0, 1.0, low_open=True)
+    number("ppo.gae_lambda", ppo["gae_lambda"], 0.0, 1.0)
+    number("ppo.learning_rate", ppo["learning_rate"], 0.0, low_open=True)
+    for key in ("clip_range", "max_grad_norm"):
+        number(f"ppo.{key}", ppo[key], 0.0, low_open=True)
+    for key in ("ent_coef", "vf_coef"):
+        number(f"ppo.{key}", ppo[key], 0.0)
+    if ppo["target_kl"] is not None:
+        number("ppo.target_kl", ppo["target_kl"], 0.0, low_open=True)
+    number("policy.log_std_init", config["policy"]["log_std_init"], -20.0, 5.0)
+    norm = config["normalize"]
+    for key in ("norm_obs", "norm_reward"):
+        if not isinstance(norm[key], bool):
+            raise ValueError(f"normalize.{key} must be true or false, got {norm[key]!r}")
+    for key in ("clip_obs", "clip_reward"):
+        number(f"normalize.{key}", norm[key], 0.0, low_open=True)
     policy = config["policy"]
     if not (isinstance(policy["net_arch"], list) and all(isinstance(n, int) and n > 0 for n in policy["net_arch"])):
         raise ValueError(f"policy.net_arch must be a list of positive layer widths, got {policy['net_arch']!r}")
@@ -171,23 +220,37 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
     if config["residual"] not in _RESIDUAL_BASES:
         raise ValueError(f"residual must be one of {_RESIDUAL_BASES}, got {config['residual']!r}")
     scale = config["residual_scale"]
-    if isinstance(scale, (int, float)):
+    if isinstance(scale, (int, float)) and not isinstance(scale, bool):
         scale = config["residual_scale"] = [float(scale)] * 4
-    if len(scale) != 4 or not all(0.0 < float(s) <= 2.0 for s in scale):
+    if not (isinstance(scale, (list, tuple)) and len(scale) == 4
+            and all(isinstance(s, (int, float)) and not isinstance(s, bool) and 0.0 < s <= 2.0 for s in scale)):
         raise ValueError(f"residual_scale must be 4 numbers in (0, 2], got {scale!r}")
+    base_kwargs = config["residual_base_kwargs"]
+    if not (isinstance(base_kwargs, dict) and all(isinstance(v, dict) or v is None for v in base_kwargs.values())):
+        raise ValueError(f"residual_base_kwargs must map a base controller to its keywords, got {base_kwargs!r}")
     if not isinstance(config["env_kwargs"], dict):
         raise ValueError(f"env_kwargs must be a mapping, got {config['env_kwargs']!r}")
     reserved = sorted({"randomize", "task"} & set(config["env_kwargs"]))
     if reserved:
         raise ValueError(f"env_kwargs must not set {reserved}; use randomize/randomize_ranges")
     ranges = config["randomize_ranges"] or {}
+    if not isinstance(ranges, dict):
+        raise ValueError(f"randomize_ranges must be a mapping of name: [low, high], got {ranges!r}")
     for key, bounds in ranges.items():
-        if not (isinstance(bounds, (list, tuple)) and len(bounds) == 2):
+        if not (isinstance(bounds, (list, tuple)) and len(bounds) == 2
+                and all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in bounds)):
             raise ValueError(f"randomize_ranges[{key!r}] must be a [low, high] pair, got {bounds!r}")
     if config["randomize"] and not ranges:
         raise ValueError("randomize is on but randomize_ranges is empty")
-    if int(config["eval"]["episodes"]) < 1 or int(config["card_eval"]["episodes"]) < 1:
-        raise ValueError("eval.episodes and card_eval.episodes must be at least 1")
+    for name in ("eval.freq", "eval.episodes", "card_eval.episodes"):
+        section, key = name.split(".")
+        positive_int(name, config[section][key])
+    for name in ("eval.seed", "card_eval.seed"):
+        section, key = name.split(".")
+        if isinstance(config[section][key], bool) or not isinstance(config[section][key], int):
+            raise ValueError(f"{name} must be an integer, got {config[section][key]!r}")
+    if not isinstance(config["randomize"], bool):
+        raise ValueError(f"randomize must be true or false, got {config['randomize']!r}")
     return config
 
 

@@ -44,7 +44,11 @@ def env_kwargs(config: dict[str, Any], randomize: bool | None = None) -> dict[st
 
 def make_env(config: dict[str, Any], randomize: bool | None = None, monitor: bool = True) -> gym.Env:
     """One environment for ``config`` (residual-wrapped if ``config["residual"]``)."""
-    env = gym.make(config["env_id"], **env_kwargs(config, randomize))
+    try:
+        env = gym.make(config["env_id"], **env_kwargs(config, randomize))
+    except TypeError as exc:  # an unknown keyword: a configuration error, not a crash
+        reason = str(exc).split(" was raised from the environment creator")[0]
+        raise ValueError(f"env_kwargs for {config['env_id']}: {reason}") from exc
     if config["residual"]:
         name = config["residual"]
         base_kwargs = dict(config["residual_base_kwargs"].get(name) or {})

@@ -3,7 +3,7 @@
 :func:`evaluate_agent` runs :func:`controllers.evaluation.evaluate` (one episode per
 seed, ``env.reset(seed=seed)``; the function ``wall-inspector compare`` uses for PID,
 MPC and SC-MPC) and adds the episode returns, which that function does not record,
-through a thin wrapper that sums rewards. The result is one flat dict for the model
+through Gymnasium's ``RecordEpisodeStatistics`` wrapper. The result is one flat dict for the model
 card, lengths in metres:
 
 * ``mean_return``, ``std_return``, ``mean_length_s``, ``completed`` (fraction of
@@ -22,31 +22,9 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.wrappers import RecordEpisodeStatistics
 
-__all__ = ["ReturnRecorder", "evaluate_agent"]
-
-
-class ReturnRecorder(gym.Wrapper):
-    """Sums each episode's rewards into ``returns`` (one entry per finished episode)."""
-
-    def __init__(self, env: gym.Env):
-        super().__init__(env)
-        self.returns: list[float] = []
-        self.lengths: list[int] = []
-        self._total, self._steps = 0.0, 0
-
-    def reset(self, **kwargs):
-        self._total, self._steps = 0.0, 0
-        return self.env.reset(**kwargs)
-
-    def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        self._total += float(reward)
-        self._steps += 1
-        if terminated or truncated:
-            self.returns.append(self._total)
-            self.lengths.append(self._steps)
-        return obs, reward, terminated, truncated, info
+__all__ = ["evaluate_agent"]
 
 
 def evaluate_agent(policy: Any, env_id: str, env_kwargs: dict[str, Any] | None = None,
@@ -56,21 +34,23 @@ def evaluate_agent(policy: Any, env_id: str, env_kwargs: dict[str, Any] | None =
     import wall_env  # noqa: F401  (registers the tasks)
     from controllers.evaluation import evaluate
 
-    recorders: list[ReturnRecorder] = []
+    seeds = list(seeds)
+    recorders: list[RecordEpisodeStatistics] = []
 
     def make() -> gym.Env:
-        recorders.append(ReturnRecorder(gym.make(env_id, **(env_kwargs or {}))))
+        recorders.append(RecordEpisodeStatistics(gym.make(env_id, **(env_kwargs or {})), buffer_length=len(seeds) + 1))
         return recorders[-1]
 
-    result = evaluate(policy, make, list(seeds), deterministic=deterministic)
+    result = evaluate(policy, make, seeds, deterministic=deterministic)
     m = result.metrics()
     recorder = recorders[-1]
-    dt = float(recorder.unwrapped.control_dt)
+    returns, lengths = np.asarray(recorder.return_queue, dtype=float), np.asarray(recorder.length_queue, dtype=float)
+    dt = float(recorder.get_wrapper_attr("control_dt"))
     return {
         "episodes": m["episodes"],
-        "mean_return": float(np.mean(recorder.returns)),
-        "std_return": float(np.std(recorder.returns)),
-        "mean_length_s": float(np.mean(recorder.lengths)) * dt,
+        "mean_return": float(np.mean(returns)),
+        "std_return": float(np.std(returns)),
+        "mean_length_s": float(np.mean(lengths)) * dt,
         "completed": 1.0 - m["terminated_early"] / m["episodes"],
         "position_rmse_m": m["rmse_norm"],
         "rmse_xyz_m": m["rmse"],

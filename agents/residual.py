@@ -101,6 +101,8 @@ class ResidualActionWrapper(gym.Wrapper):
         if not np.all(self.scale > 0):
             raise ValueError(f"scale must be positive, got {self.scale.tolist()}")
         inner = env.observation_space
+        if not isinstance(inner, spaces.Box):
+            raise ValueError(f"a residual agent needs a Box observation space, got {inner}")
         low = np.concatenate([inner.low, -np.ones(4, dtype=np.float32)])
         high = np.concatenate([inner.high, np.ones(4, dtype=np.float32)])
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
@@ -146,7 +148,15 @@ class ResidualPolicy:
         self.scale = np.broadcast_to(np.asarray(scale, dtype=np.float64), (4,)).copy()
         self.name = name
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+    @property
+    def failures(self) -> int:
+        """Hover fallbacks so far (non-finite observations, solver failures) of base and correction."""
+        return int(getattr(self.base, "failures", 0)) + int(getattr(self.correction, "failures", 0))
+
+    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+        """The combined action for one observation or a batch; a non-finite observation
+        gives the base controller's hover fallback with no correction (both count it)."""
         obs = np.asarray(observation, dtype=np.float32)
         base_action, state = _base_predict(self.base, obs, state, episode_start)
         correction, _ = self.correction.predict(augment_observation(obs, base_action), deterministic=deterministic)

@@ -16,13 +16,15 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Sequence
+from typing import Any
 
 from agents.config import apply_overrides, default_config
 
 __all__ = ["measure"]
 
 
-def measure(task: str, layout: str, n_envs: int, n_workers: int, timesteps: int, overrides: list[str] = ()) -> float:
+def measure(task: str, layout: str, n_envs: int, n_workers: int, timesteps: int, overrides: Sequence[str] = ()) -> float:
     """Env steps per second of ``timesteps`` PPO training steps with one layout."""
     import torch
     from stable_baselines3 import PPO
@@ -34,6 +36,7 @@ def measure(task: str, layout: str, n_envs: int, n_workers: int, timesteps: int,
     rollout = config["n_envs"] * config["ppo"]["n_steps"]
     ppo = {**config["ppo"], "n_steps": max(rollout // n_envs, 1)}
     torch.set_num_threads(int(config["torch_threads"]))
+    venv: Any
     if layout == "sb3":
         venv = SubprocVecEnv([env_factory(config) for _ in range(n_envs)])
     else:

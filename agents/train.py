@@ -24,6 +24,18 @@ What a run does:
   ``--ship`` then copies the best checkpoint and its card into
   ``agents/pretrained/<task>/``.
 
+PPO learns from whole rollouts of ``n_envs * ppo.n_steps`` env steps, so a run trains
+the most whole rollouts that fit in ``--timesteps`` (never more steps than asked for).
+
+Ctrl-C (``SIGINT``) stops a run cleanly: the model, its normalisation statistics and the
+step count are saved into ``OUT/checkpoints/<steps>/`` and the command prints how to go
+on; ``--resume OUT`` continues from the latest checkpoint with the same step count.
+Checkpoints are also written every ``checkpoint_freq`` env steps and every
+``checkpoint_minutes`` of wall time.
+
+Every argument is checked before the run folder or any worker process exists; a bad one
+stops the command with a one-line message.
+
 Throughput is total env steps of the run divided by its wall time, PPO updates,
 evaluations and checkpoints included.
 """
@@ -50,11 +62,30 @@ from agents.config import (
     load_config,
     save_config,
     task_env_id,
+    validate_config,
 )
+from wall_env.validation import check_output_folder
 
-__all__ = ["add_arguments", "run", "train", "TrainingRun", "check_observations", "policy_description"]
+__all__ = [
+    "TrainingInterrupted",
+    "TrainingRun",
+    "add_arguments",
+    "check_observations",
+    "planned_timesteps",
+    "policy_description",
+    "run",
+    "train",
+]
 
-_FINAL_FILES = ("model.zip", "normalization.json", "policy.json")
+_FINAL_FILES = ("model.zip", "vecnormalize.pkl", "policy.json")
+
+
+class TrainingInterrupted(KeyboardInterrupt):
+    """Training was stopped by Ctrl-C; ``checkpoint`` holds everything needed to resume."""
+
+    def __init__(self, run_dir: Path, checkpoint: Path, num_timesteps: int):
+        super().__init__(f"interrupted at {num_timesteps} env steps; saved in {checkpoint}")
+        self.run_dir, self.checkpoint, self.num_timesteps = run_dir, checkpoint, num_timesteps
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -78,6 +109,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--eval-freq", type=int, help="env steps between evaluations (default: config)")
     parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: config)")
     parser.add_argument("--checkpoint-freq", type=int, help="env steps between checkpoints, 0 = none (default: config)")
+    parser.add_argument("--checkpoint-minutes", type=float,
+                        help="wall-clock minutes between checkpoints as well, 0 = none (default: config, 10)")
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its latest checkpoint")
     parser.add_argument("--ship", action="store_true",
                         help="copy the best checkpoint and its model card into agents/pretrained/<task>/")
@@ -92,15 +125,16 @@ def _config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         if args.env:
             config["env_id"] = task_env_id(args.env)
         if not config.get("env_id"):
-            raise SystemExit("--env is needed when the configuration file names no env_id")
+            raise ValueError("--env is needed when the configuration file names no env_id")
     else:
         if not args.env:
-            raise SystemExit("--env is required (e.g. --env WallInspector/WallSweep-v0)")
+            raise ValueError("--env is required (e.g. --env WallInspector/WallSweep-v0)")
         config = default_config(args.env)
     flags = {
         "timesteps": args.timesteps, "n_envs": args.n_envs, "n_workers": args.workers, "seed": args.seed,
         "vector": args.vector,
         "randomize": args.randomize, "checkpoint_freq": args.checkpoint_freq,
+        "checkpoint_minutes": args.checkpoint_minutes,
         "residual": None if args.residual == "none" else args.residual,
     }
     for key, value in flags.items():
@@ -110,9 +144,25 @@ def _config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         config["eval"]["freq"] = args.eval_freq
     if args.eval_episodes is not None:
         config["eval"]["episodes"] = args.eval_episodes
-    if args.workers is None and config["n_workers"] > config["n_envs"]:
+    if args.workers is None and isinstance(config["n_envs"], int) and 0 < config["n_envs"] < config["n_workers"]:
         config["n_workers"] = config["n_envs"]
     return apply_overrides(config, args.set)
+
+
+def planned_timesteps(config: dict[str, Any], start: int = 0) -> int:
+    """The step count a run reaches: ``start`` plus the most whole PPO rollouts
+    (``n_envs * ppo.n_steps`` env steps each) that fit in ``config["timesteps"]``.
+
+    ``ValueError`` if not even one rollout fits.
+    """
+    rollout = int(config["n_envs"]) * int(config["ppo"]["n_steps"])
+    rollouts = (int(config["timesteps"]) - int(start)) // rollout
+    if rollouts < 1:
+        raise ValueError(f"--timesteps {config['timesteps']} leaves no room for one PPO rollout of {rollout} env steps "
+                         f"(n_envs {config['n_envs']} x ppo.n_steps {config['ppo']['n_steps']})"
+                         + (f" after the {start} steps already trained" if start else "")
+                         + f"; ask for at least {int(start) + rollout}")
+    return int(start) + rollouts * rollout
 
 
 def _command(args: argparse.Namespace, config: dict[str, Any]) -> str:
@@ -134,6 +184,8 @@ def _command(args: argparse.Namespace, config: dict[str, Any]) -> str:
             parts += ["--eval-episodes", str(args.eval_episodes)]
         if args.checkpoint_freq is not None:
             parts += ["--checkpoint-freq", str(args.checkpoint_freq)]
+        if args.checkpoint_minutes is not None:
+            parts += ["--checkpoint-minutes", str(args.checkpoint_minutes)]
         for item in args.set:
             parts += ["--set", item]
         if args.ship:
@@ -174,15 +226,24 @@ def check_observations(config: dict[str, Any], n: int = 8, seed: int = 12345) ->
         env.close()
 
 
-def _git_commit() -> str | None:
+_TRACKED = ("agents", "wall_env", "controllers")  # the code a trained agent depends on
+
+
+def git_state() -> dict[str, Any] | None:
+    """``{"commit": sha, "uncommitted": [files]}`` of the code in ``agents/``, ``wall_env/``
+    and ``controllers/`` (the files that differ from the commit, shipped agents excluded),
+    or ``None`` outside a git checkout."""
     try:
         root = Path(__file__).resolve().parent.parent
         commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
         if commit.returncode != 0:
             return None
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", "agents", "wall_env", "controllers"], cwd=root,
-                               capture_output=True, text=True, timeout=10).stdout.strip()
-        return commit.stdout.strip() + (" (with uncommitted changes)" if dirty else "")
+        status = subprocess.run(["git", "status", "--porcelain", "--", *_TRACKED, ":!agents/pretrained"], cwd=root,
+                                capture_output=True, text=True, timeout=10)
+        if status.returncode != 0:
+            return None
+        files = sorted(line[3:] for line in status.stdout.splitlines() if line.strip())
+        return {"commit": commit.stdout.strip(), "uncommitted": files}
     except (OSError, subprocess.SubprocessError):
         return None
 
@@ -194,14 +255,15 @@ def _latest_checkpoint(run_dir: Path) -> Path:
     candidates = []
     for folder in [run_dir, *sorted((run_dir / "checkpoints").glob("*"))]:
         if all((folder / name).is_file() for name in _FINAL_FILES):
-            candidates.append((int(read_json(folder / "policy.json").get("num_timesteps", 0)), str(folder)))
+            info = read_json(folder / "policy.json")
+            candidates.append((int(info.get("num_timesteps", 0)) if isinstance(info, dict) else 0, str(folder)))
     if not candidates:
         raise CheckpointNotFoundError(f"nothing to resume in {run_dir}: no {'/'.join(_FINAL_FILES)} there or in "
                                       f"{run_dir / 'checkpoints'}/*")
     return Path(max(candidates)[1])
 
 
-def _make_ppo(config: dict[str, Any], env, tb_dir: Path, verbose: int):
+def _make_ppo(config: dict[str, Any], env: Any, tb_dir: Path, verbose: int) -> Any:
     import torch
     from stable_baselines3 import PPO
 
@@ -240,14 +302,19 @@ class TrainingRun:
 
 
 def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, progress_bar: bool = True,
-          verbose: int = 1, command: str | None = None) -> TrainingRun:
-    """Train (or, with ``resume``, continue) a run in ``out_dir``."""
+          verbose: int = 1, command: str | None = None, checks: np.ndarray | None = None) -> TrainingRun:
+    """Train (or, with ``resume``, continue) a run in ``out_dir``.
+
+    ``checks``: the observations of :func:`check_observations` if already computed.
+
+    Raises :class:`TrainingInterrupted` on Ctrl-C, after saving a checkpoint to resume from.
+    """
     import torch
     from stable_baselines3.common.callbacks import CallbackList, EvalCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.callbacks import CollisionLog, PeriodicCheckpoint, ProgressBar, SaveBestCheckpoint, TrainingClock
-    from agents.checkpoints import load_model, read_json, restore_normalization, save_checkpoint, write_model_card
+    from agents.checkpoints import load_model, read_json, save_checkpoint, write_model_card
     from agents.envs import make_vec_env
 
     started = time.perf_counter()
@@ -255,19 +322,22 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     torch.set_num_threads(int(config["torch_threads"]))
     description = policy_description(config)
     norm = config["normalize"]
-    checks = check_observations(config)
+    git = git_state()  # the code this run starts from
 
     previous_wall = 0.0
     best_so_far = -np.inf
+    start_steps = 0
     if resume:
         source = _latest_checkpoint(out)
-        model, state, info = load_model(source)
+        model, saved_normalizer, info = load_model(source)
+        start_steps = int(model.num_timesteps)
         previous_wall = float(info.get("wall_time_s", 0.0))
         if (out / "best" / "policy.json").is_file():
             best_so_far = float(read_json(out / "best" / "policy.json").get("eval_mean_return", -np.inf))
-        if model.num_timesteps >= config["timesteps"]:
-            raise SystemExit(f"{source} already has {model.num_timesteps} timesteps; pass a larger --timesteps to go on")
-    else:
+    target_steps = planned_timesteps(config, start_steps)  # ValueError before any worker starts
+    if checks is None:
+        checks = check_observations(config)  # builds the env once: bad env settings fail here
+    if not resume:
         out.mkdir(parents=True, exist_ok=True)
         save_config(config, out / "config.yaml")
 
@@ -278,17 +348,16 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                                  clip_obs=float(norm["clip_obs"]), clip_reward=float(norm["clip_reward"]),
                                  gamma=float(config["ppo"]["gamma"]))
         if resume:
-            restore_normalization(train_env, state)
+            train_env.obs_rms, train_env.ret_rms = saved_normalizer.obs_rms, saved_normalizer.ret_rms
             model.set_env(train_env)
             model.tensorboard_log = str(out / "tb")
-            print(f"resuming from {source} at {model.num_timesteps} timesteps", file=sys.stderr)
+            print(f"resuming from {source} at {start_steps} timesteps", file=sys.stderr)
         else:
             model = _make_ppo(config, train_env, out / "tb", verbose)
-        start_steps = int(model.num_timesteps)
 
         # the same wrappers as the training env (sync_envs_normalization walks both stacks)
-        eval_env = VecNormalize(make_vec_env(config, 1, 0, vector=vector_kind(config)), training=False, norm_obs=norm["norm_obs"], norm_reward=False,
-                                clip_obs=float(norm["clip_obs"]))
+        eval_env = VecNormalize(make_vec_env(config, 1, 0, vector=vector_kind(config)), training=False,
+                                norm_obs=norm["norm_obs"], norm_reward=False, clip_obs=float(norm["clip_obs"]))
         eval_env.seed(int(config["eval"]["seed"]))
         clock = TrainingClock(previous_wall)
         best = SaveBestCheckpoint(out / "best", description, clock, checks)
@@ -305,14 +374,18 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         from agents.timing import TimeSplit
 
         time_split = TimeSplit(venv.unwrapped if hasattr(venv, "unwrapped") else venv)
-        callbacks = [time_split, evaluation, CollisionLog()]
-        if int(config["checkpoint_freq"]) > 0:
-            callbacks.append(PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks))
+        periodic = PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks,
+                                      every_s=60.0 * float(config["checkpoint_minutes"]))
+        callbacks = [time_split, evaluation, CollisionLog(), periodic]
         if progress_bar:
-            callbacks.append(ProgressBar(config["timesteps"], initial=start_steps))
+            callbacks.append(ProgressBar(target_steps, initial=start_steps))
 
-        model.learn(total_timesteps=config["timesteps"] - start_steps, callback=CallbackList(callbacks),
-                    reset_num_timesteps=not resume, tb_log_name="ppo", progress_bar=False)
+        try:
+            model.learn(total_timesteps=target_steps - start_steps, callback=CallbackList(callbacks),
+                        reset_num_timesteps=not resume, tb_log_name="ppo", progress_bar=False)
+        except KeyboardInterrupt:
+            saved = periodic.save()  # model, statistics, step count and wall time: all --resume needs
+            raise TrainingInterrupted(out, saved, int(model.num_timesteps)) from None
         run_time = clock.this_run_s
         total_time = clock.total_s
         save_checkpoint(out, model, train_env, {**description, "num_timesteps": int(model.num_timesteps),
@@ -342,7 +415,8 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         "resumed": bool(resume),
         "machine": _machine(),
         "versions": _versions(),
-        "git_commit": _git_commit(),
+        "git_commit": git["commit"] if git else None,
+        "git_uncommitted": git["uncommitted"] if git else None,  # files that differed from that commit
     })
     curve_file = out / "eval" / "evaluations.npz"
     if curve_file.is_file():  # the evaluation callback's history: [env steps, mean return, mean length (steps)]
@@ -371,8 +445,10 @@ def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None,
                     + (f"learning a residual correction on top of {config['residual']}" if config["residual"]
                        else "flying the task directly (collective thrust and body rates)") + "."),
         "command": command or "(trained through the Python API: agents.train.train)",
-        "checkpoint": f"{checkpoint.name}/ at {info.get('num_timesteps')} timesteps "
-                      f"(best mean evaluation return {info.get('eval_mean_return', float('nan')):.1f})",
+        "checkpoint": f"{checkpoint.name}/ at {info.get('num_timesteps')} timesteps " + (
+            f"(best mean evaluation return {info['eval_mean_return']:.1f})"
+            if np.isfinite(info.get("eval_mean_return", np.nan))
+            else "(the final model: no evaluation ran during training)"),
         "residual": config["residual"],
         "randomize": {k: list(v) for k, v in config["randomize_ranges"].items()} if config["randomize"] else None,
         "training": training,
@@ -402,31 +478,79 @@ def ship(run_dir: Path, task: str, residual: str | None = None) -> Path:
     return target
 
 
+def _usage(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
+    """The configuration and run folder the arguments ask for; ``ValueError`` for anything
+    unusable, before any folder or process exists."""
+    config, out = _resumed_run(args) if args.resume else _new_run(args)
+    if args.ship:
+        git = git_state()
+        if git is not None and git["uncommitted"]:
+            raise ValueError(f"--ship records the git commit in the model card, but {', '.join(git['uncommitted'])} "
+                             "differ from it; commit first (or train without --ship and ship a clean run)")
+    return config, out
+
+
+def _resumed_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
+    """The saved configuration of ``--resume DIR``, with the flags a resumed run may change."""
+    run_dir = Path(args.resume)
+    if not (run_dir / "config.yaml").is_file():
+        raise ValueError(f"cannot resume: {run_dir / 'config.yaml'} does not exist")
+    changing = [flag for flag, value in (("--env", args.env), ("--config", args.config), ("--n-envs", args.n_envs),
+                                         ("--seed", args.seed), ("--randomize", args.randomize),
+                                         ("--residual", args.residual), ("--set", args.set or None),
+                                         ("--out", args.out)) if value is not None]
+    if changing:
+        raise ValueError(f"--resume continues the saved configuration; drop {', '.join(changing)}")
+    config = load_config(run_dir / "config.yaml", validate=False)
+    for key, value in (("timesteps", args.timesteps), ("n_workers", args.workers),
+                       ("checkpoint_freq", args.checkpoint_freq), ("checkpoint_minutes", args.checkpoint_minutes)):
+        if value is not None:
+            config[key] = value
+    validate_config(config)
+    from agents.checkpoints import read_json
+
+    start = _latest_checkpoint(run_dir)
+    planned_timesteps(config, int(read_json(start / "policy.json").get("num_timesteps", 0)))
+    return config, run_dir
+
+
+def _new_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
+    """The configuration of a new run from the flags, and its (creatable) folder."""
+    if not args.out:
+        raise ValueError("--out is required (the run folder)")
+    out = Path(args.out)
+    if (out / "config.yaml").exists():
+        raise ValueError(f"{out} already holds a run; continue it with --resume {out} or choose another --out")
+    config = _config_from_args(args)
+    planned_timesteps(config)
+    check_output_folder(out, "--out")
+    return config, out
+
+
 def run(args: argparse.Namespace) -> int:
-    if args.resume:
-        run_dir = Path(args.resume)
-        if not (run_dir / "config.yaml").is_file():
-            raise SystemExit(f"cannot resume: {run_dir / 'config.yaml'} does not exist")
-        changing = [flag for flag, value in (("--env", args.env), ("--config", args.config), ("--n-envs", args.n_envs),
-                                             ("--seed", args.seed), ("--randomize", args.randomize),
-                                             ("--residual", args.residual), ("--set", args.set or None),
-                                             ("--out", args.out)) if value is not None]
-        if changing:
-            raise SystemExit(f"--resume continues the saved configuration; drop {', '.join(changing)}")
-        config = load_config(run_dir / "config.yaml")
-        for key, value in (("timesteps", args.timesteps), ("n_workers", args.workers), ("checkpoint_freq", args.checkpoint_freq)):
-            if value is not None:
-                config[key] = value
-        out = run_dir
-    else:
-        if not args.out:
-            raise SystemExit("--out is required (the run folder)")
-        config = _config_from_args(args)
-        out = Path(args.out)
-        if (out / "config.yaml").exists():
-            raise SystemExit(f"{out} already holds a run; continue it with --resume {out} or choose another --out")
-    card = train(config, out, resume=bool(args.resume), progress_bar=not args.no_progress,
-                 verbose=0 if args.quiet else 1, command=_command(args, config)).card
+    try:
+        config, out = _usage(args)
+        checks = check_observations(config)  # builds the env once: settings it refuses stop the command here
+        if config["randomize"]:  # and once with the randomisation ranges
+            from agents.envs import make_env
+
+            make_env(config, monitor=False).close()
+    except (ValueError, FileNotFoundError) as exc:
+        raise SystemExit(str(exc)) from None
+    planned = planned_timesteps(config) if not args.resume else None
+    if planned is not None and planned < config["timesteps"]:
+        rollout = config["n_envs"] * config["ppo"]["n_steps"]
+        print(f"training {planned // rollout} whole PPO rollouts of {rollout} env steps = {planned} of the "
+              f"{config['timesteps']} requested", file=sys.stderr)
+    try:
+        result = train(config, out, resume=bool(args.resume), progress_bar=not args.no_progress,
+                       verbose=0 if args.quiet else 1, command=_command(args, config), checks=checks)
+    except TrainingInterrupted as stop:
+        print(f"\ninterrupted at {stop.num_timesteps} env steps: model, normalisation statistics and step count saved "
+              f"in {stop.checkpoint}; continue with: wall-inspector train --resume {shlex.quote(str(stop.run_dir))} "
+              f"--timesteps {config['timesteps']}", file=sys.stderr)
+        return 130
+    card = result.card
     t, m = card["training"], card["evaluation"]["metrics"]
     print(f"trained {t['timesteps_this_run']} steps in {t['wall_time_s']:.0f} s ({t['steps_per_s']:.0f} env steps/s); "
           f"best checkpoint: return {m['mean_return']:.1f}, completed {m['completed']:.0%}, "

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import signal
 import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -76,6 +77,8 @@ def _keep(info: dict[str, Any], keys: tuple[str, ...]) -> dict[str, Any]:
 def _worker(remote, parent_remote, pickled_fns: bytes, info_keys: tuple[str, ...]) -> None:
     """Worker loop: build this worker's environments, then answer commands until ``close``."""
     parent_remote.close()
+    # Ctrl-C reaches the whole process group; the parent decides what happens (save, then close us)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # the wall env is NumPy only; keep BLAS/OpenMP from spawning threads that fight for 2 cores
     try:
         import torch
@@ -186,7 +189,7 @@ class MultiEnvSubprocVecEnv(VecEnv):
         self._slices = split_evenly(n_envs, n_workers)
         if start_method is None:
             start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-        ctx = mp.get_context(start_method)
+        ctx: Any = mp.get_context(start_method)
         self.remotes, self.processes = [], []
         self.waiting = False
         self.closed = False
@@ -241,13 +244,12 @@ class MultiEnvSubprocVecEnv(VecEnv):
     def close(self) -> None:
         if self.closed:
             return
-        if self.waiting:
-            for remote in self.remotes:
-                remote.recv()
         for remote in self.remotes:
             try:
+                if self.waiting:
+                    remote.recv()
                 remote.send(("close", None))
-            except BrokenPipeError:
+            except (EOFError, OSError):  # the worker is gone already
                 pass
         for process in self.processes:
             process.join(timeout=10)

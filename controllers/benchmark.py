@@ -18,7 +18,7 @@ Reported, in milliseconds: median, p99, p99.8 and max of
 
 the ratio of IPOPT's to LM's median, and the relative cost gap
 ``(F_LM - F_IPOPT) / F_IPOPT`` (its share of steps within 1 %, median and max).
-Targets (issue 3), checked on the wall-clock LM figures: median <= 1.0 ms,
+Targets, checked on the wall-clock LM figures: median <= 1.0 ms,
 p99.8 <= 3 ms, >= 10x faster than IPOPT, gap within 1 % on >= 95 % of the steps. The process is pinned to one CPU core
 (``--no-pin`` to leave it free); ``--high-priority`` runs the SC-MPC steps (not the
 simulator, not IPOPT) with real-time FIFO scheduling where permitted, so that other
@@ -34,6 +34,7 @@ import json
 import os
 import platform
 import time
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -120,7 +121,7 @@ def measure(steps: int, seed: int, k_s: float, d_thr: float, with_ipopt: bool = 
             action, _ = policy.predict(observation, episode_start=np.array([start]))
         start = False
         record = policy.last_solves[0]
-        if ipopt is not None:
+        if ipopt is not None and record is not None:
             result = ipopt.solve(record.Z0, record.start, record.stage_params, record.global_params)
             ipopt_times.append(result.seconds)
             ipopt_cost.append(result.cost)
@@ -133,7 +134,7 @@ def measure(steps: int, seed: int, k_s: float, d_thr: float, with_ipopt: bool = 
             episodes += 1
             start = True
     env.close()
-    out = {
+    out: dict[str, Any] = {
         "env": ENV_ID,
         "k_s": k_s,
         "d_thr": d_thr,

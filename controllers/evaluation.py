@@ -57,7 +57,7 @@ def solve_time_stats(seconds: Sequence[float]) -> dict[str, float]:
     """Median, mean, p99, p99.8 and max of solve times, in milliseconds (NaN if empty)."""
     ms = 1e3 * np.asarray(seconds, dtype=float)
     if ms.size == 0:
-        return {k: math.nan for k in ("median", "mean", "p99", "p99_8", "max")} | {"count": 0}
+        return dict.fromkeys(("median", "mean", "p99", "p99_8", "max"), math.nan) | {"count": 0}
     return {
         "median": float(np.median(ms)),
         "mean": float(ms.mean()),
@@ -173,7 +173,7 @@ def evaluate(
     *,
     deterministic: bool = True,
     reset_options: dict[str, Any] | None = None,
-    on_episode: Callable[[EpisodeRecord], None] | None = None,
+    on_episode: Callable[[EpisodeRecord], object] | None = None,
 ) -> EvaluationResult:
     """Fly ``policy`` for one episode per seed on ``env`` (an env id such as
     ``"WallInspector/WallSweep-v0"`` made with ``env_kwargs``, or a zero-argument env
@@ -199,7 +199,7 @@ def evaluate(
         if not callable(policy):
             raise ValueError("policy must have a predict() method or be a factory policy(env)")
         policy = policy(environment)
-    base = environment.unwrapped
+    base: Any = environment.unwrapped
     mapping = base.action_mapping
     hover_thrust = base.vehicle.mass * GRAVITY
     episodes = []

@@ -13,7 +13,7 @@ Per control step, from the observation and the reference:
 5. body rates ``omega = K_R * Log(R^T R_des) + omega_des``, where ``omega_des`` is the
    flatness feed-forward from the reference jerk (central difference of ``a_ref``).
 
-Defaults are the authors' released gains (``../shared/notes/reference-numbers.md``):
+Defaults are the authors' released gains (the ``paper`` preset of :mod:`controllers.presets`):
 Kp = (8, 8, 10) 1/s^2, Kv = (4, 4, 6) 1/s, K_R = (6, 6, 4) 1/s, no integral. The
 commands are clipped to the vehicle's limits by the action mapping. There is no
 memory between steps, so the controller is exact under batching.

@@ -147,7 +147,7 @@ class ControllerPolicy(ABC):
                                  "build the controller again for it")
         return self._new_memory(scene, reference)
 
-    def _before_batch(self, n: int) -> None:
+    def _before_batch(self, n: int) -> None:  # noqa: B027 - an optional hook, empty unless overridden
         """Hook called once per :meth:`predict` with the batch size."""
 
     # ------------------------------------------------------------------ internals

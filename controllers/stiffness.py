@@ -93,7 +93,8 @@ def side_push_response(make_policy: Callable[[gym.Env], Any], force: float = 0.1
             done = terminated or truncated
             times.append(info["time"])
             xs.append(info["p_world"][0] - x_ref)
-        mass = env.unwrapped.vehicle.mass
+        unwrapped: Any = env.unwrapped
+        mass = unwrapped.vehicle.mass
     finally:
         env.close()
     t, x = np.asarray(times), np.asarray(xs) * math.copysign(1.0, force)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -24,7 +25,7 @@ import numpy as np
 from wall_env.aero import AeroModel
 from wall_env.codegen import CompiledFunction
 from wall_env.effects import make_effect
-from wall_env.scene import Scene
+from wall_env.scene import Scene, Wall
 
 __all__ = ["SampleStates", "ForceEvaluator", "CHUNK"]
 
@@ -86,7 +87,7 @@ def _mapped(structure_key: tuple, rotors: tuple, scene_structure: tuple, gravity
 
 def _placeholder_scene(structure: tuple) -> Scene:
     n_walls, has_ground, has_ceiling = structure
-    return Scene(tuple({"point": (0.0, 0.0, 0.0), "normal": (1.0, 0.0, 0.0)} for _ in range(n_walls)),
+    return Scene(tuple(Wall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)) for _ in range(n_walls)),
                  0.0 if has_ground else None, 10.0 if has_ceiling else None)
 
 
@@ -106,11 +107,11 @@ class ForceEvaluator:
         key = (model.structure_key, tuple(map(tuple, np.asarray(rotor_positions_body, dtype=float))),
                scene.structure, float(gravity))
         self._key = key
-        self._force = None
-        self._jacobian = None
+        self._force: CompiledFunction | None = None
+        self._jacobian: CompiledFunction | None = None
 
     @staticmethod
-    def _packed(states: SampleStates) -> list[tuple[np.ndarray, ...]]:
+    def _packed(states: SampleStates) -> list[tuple[Any, ...]]:
         """Per-chunk input arrays, column-major as the compiled code wants them (cached on ``states``)."""
         cached = states.__dict__.get("_packed_chunks")
         if cached is not None:

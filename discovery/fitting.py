@@ -147,10 +147,10 @@ class _Term:
     def evaluate(self, theta: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, p)`` per segment at the fit rows."""
         theta = np.asarray(theta, dtype=float)
-        if self.affine:
+        if self.affine and self._affine_base is not None:
             forces = [f + j @ (theta - a) for f, j, a in self._affine_base]
             return forces, [j for _, j, _ in self._affine_base]
-        if self._cache_theta is not None and np.array_equal(theta, self._cache_theta):
+        if self._cache is not None and self._cache_theta is not None and np.array_equal(theta, self._cache_theta):
             return self._cache
         self._cache = self._evaluate(theta)
         self._cache_theta = theta.copy()
@@ -203,7 +203,7 @@ class EffectFit:
 
     def _stacked(self, theta: np.ndarray, masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         residual = self.residuals(theta)
-        jac_parts = [[] for _ in self.data.segments]
+        jac_parts: list[list[np.ndarray]] = [[] for _ in self.data.segments]
         for term, th in zip(self.terms, self._split(theta)):
             _, jacobians = term.evaluate(th)
             for s, j in enumerate(jacobians):
@@ -263,6 +263,7 @@ class EffectFit:
             result = self._solve(np.asarray(x0, dtype=float), masks)
             if best is None or result.cost < best.cost:
                 best = result
+        assert best is not None  # starts is never empty
         theta = best.x
         std = self._standard_errors(theta, masks, best.jac, best.fun)
         effects = [template.with_params(th) for template, th in zip(self.templates, self._split(theta))]

@@ -116,7 +116,9 @@ class NominalVehicle:
 
     @classmethod
     def from_vehicle_params(cls, vehicle: VehicleParams) -> NominalVehicle:
-        return cls(float(vehicle.mass), tuple(tuple(r) for r in vehicle.rotor_positions), tuple(vehicle.drag))
+        rotors: Any = tuple(tuple(float(c) for c in r) for r in vehicle.rotor_positions)
+        drag: Any = tuple(float(c) for c in vehicle.drag)
+        return cls(float(vehicle.mass), rotors, drag)
 
     def to_dict(self) -> dict[str, Any]:
         return {"mass": self.mass, "rotor_positions": [list(r) for r in self.rotor_positions], "drag": list(self.drag)}
@@ -247,7 +249,8 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
     try:
         header = next(reader)
     except StopIteration:
-        raise LogFormatError(f"{path}: the file is empty; expected a header row with columns {list(REQUIRED_COLUMNS)}")
+        raise LogFormatError(
+            f"{path}: the file is empty; expected a header row with columns {list(REQUIRED_COLUMNS)}") from None
     header = [h.strip() for h in header]
     duplicates = sorted({h for h in header if header.count(h) > 1})
     if duplicates:
@@ -262,7 +265,7 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
             absent = [c for c in group if c not in header]
             raise LogFormatError(f"{path}: line 1 (header): optional columns {list(group)} come all together; "
                                  f"has {present} but not column(s) {absent}")
-    rows = []
+    rows: list[tuple[int, list[str]]] = []
     for line_number, row in enumerate(reader, start=2):
         if not row or all(not cell.strip() for cell in row):
             continue
@@ -387,7 +390,7 @@ class _Sidecar:
         return value
 
     def number(self, key: str, value: Any, low: float = -math.inf, high: float = math.inf,
-               allow_null: bool = False) -> float | None:
+               allow_null: bool = False) -> Any:  # a float, or None if allowed
         if value is None and allow_null:
             return None
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -397,7 +400,7 @@ class _Sidecar:
             raise self.fail(key, f"must be a finite number in [{low:g}, {high:g}], got {value!r}")
         return float(value)
 
-    def vector(self, key: str, value: Any, size: int, low: float = -math.inf) -> tuple[float, ...]:
+    def vector(self, key: str, value: Any, size: int, low: float = -math.inf) -> Any:  # a tuple of size floats
         if not isinstance(value, list) or len(value) != size:
             raise self.fail(key, f"must be a list of {size} numbers, got {_type_name(value)} {value!r}")
         return tuple(self.number(f"{key}[{i}]", v, low=low) for i, v in enumerate(value))

@@ -155,7 +155,7 @@ def make_policy(policy: str, env: gym.Env, model: str | Path | None = None,
     if name in ("pid", "mpc", "scmpc"):
         import controllers
 
-        cls = {"pid": controllers.PID, "mpc": controllers.MPC, "scmpc": controllers.SCMPC}[name]
+        cls: Any = {"pid": controllers.PID, "mpc": controllers.MPC, "scmpc": controllers.SCMPC}[name]
         if model is not None:
             if name != "scmpc":
                 raise ValueError("--policy-model is for --policy scmpc")
@@ -166,15 +166,9 @@ def make_policy(policy: str, env: gym.Env, model: str | Path | None = None,
     path = Path(policy)
     if not path.exists():
         raise FileNotFoundError(f"--policy must be pid, mpc, scmpc or the path of a saved agent; {path} does not exist")
-    try:
-        from agents.policy import load_policy
-    except ImportError:
-        load_policy = None
-    if load_policy is not None and (path.is_dir() or (path.parent / "policy.json").exists()):
-        return load_policy(path, env=env)
-    from stable_baselines3 import PPO
+    from agents.policy import load_policy  # a checkpoint folder or its model.zip, with its VecNormalize statistics
 
-    return PPO.load(str(path), device="cpu")
+    return load_policy(path, env=env)
 
 
 def record_flight(env: gym.Env, policy: Any, *, seed: int, nominal_vehicle: VehicleParams,
@@ -186,7 +180,7 @@ def record_flight(env: gym.Env, policy: Any, *, seed: int, nominal_vehicle: Vehi
     Row ``k`` holds the measured state before step ``k``, the command of step ``k`` and (optionally)
     the rotor thrusts that command produced over the step.
     """
-    base = env.unwrapped
+    base: Any = env.unwrapped
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x10C]))
     obs, info = env.reset(seed=int(seed))
     states, commands, thrusts, effect_forces = [], [], [], []
@@ -195,7 +189,7 @@ def record_flight(env: gym.Env, policy: Any, *, seed: int, nominal_vehicle: Vehi
     terminated = truncated = False
     step = 0
     n_steps = base.n_steps
-    iterator = range(n_steps)
+    iterator: Any = range(n_steps)
     if progress:
         from tqdm import tqdm
 
@@ -296,7 +290,7 @@ def fly(env_id: str | None = None, policy: str = "pid", effects: Any = None, see
                                      with_rotor_thrusts=with_rotor_thrusts, progress=progress)
     finally:
         setup.env.close()
-    scenario = {
+    record = {
         **setup.scenario,
         "policy": str(policy),
         "policy_model": None if policy_model is None else str(policy_model),
@@ -309,13 +303,13 @@ def fly(env_id: str | None = None, policy: str = "pid", effects: Any = None, see
         "note": "ground truth of a simulated flight; not part of the log format. Discovery reads it only to "
                 "run the closed-loop check in the same world.",
     }
-    summary["scenario"] = scenario
+    summary["scenario"] = record
     if out is not None:
         csv_path, json_path = write_log(log, out, overwrite=overwrite)
         truth = scenario_path(csv_path)
         if truth.exists() and not overwrite:
             raise FileExistsError(f"{truth} exists; pass overwrite=True (or --overwrite) to replace it")
-        truth.write_text(json.dumps(scenario, indent=2) + "\n")
+        truth.write_text(json.dumps(record, indent=2) + "\n")
         summary["files"] = [str(csv_path), str(json_path), str(truth)]
         log.source = str(csv_path)
     return log, summary
@@ -353,7 +347,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    parsed = {}
+    parsed: dict[str, Any] = {}
     for option in ("env_kwargs", "policy_kwargs", "survey"):
         text = getattr(args, option)
         if text is None:

@@ -78,6 +78,7 @@ def predict(seg: Segment, starts: np.ndarray, steps: int, model: AeroModel, roto
     evaluator = seg.evaluator(model, rotor_positions_body) if model.effects else None
     m = seg.states.mass
     g = np.array([0.0, 0.0, seg.gravity])
+    assert seg.p_start is not None and seg.v_start is not None, "segment without prediction starts"
     p = seg.p_start[starts].copy()
     v = seg.v_start[starts].copy()
     R_all, w_all, f_all = seg.states.R_body_to_world, seg.states.omega_body, seg.states.rotor_thrusts
@@ -110,6 +111,7 @@ def prediction_pairs(data: FlightData, model: AeroModel, fold_theta: list[np.nda
         if fold_theta is not None and model.param_size:
             theta = np.stack([fold_theta[k] for k in w.fold])
         predicted.append(predict(seg, w.starts, w.steps, model, data.rotor_positions_body, theta))
+        assert seg.p_measured is not None, "segment without logged positions"
         measured.append(seg.p_measured[w.starts + w.steps])
         starts.append(seg.p_measured[w.starts])
     if not predicted:

@@ -25,6 +25,7 @@ nearest surface is named.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -123,7 +124,7 @@ def localise_residual(data: FlightData, residual: np.ndarray, candidates: list[R
     candidates = candidates if candidates is not None else regressors(data)
     folds = data.folds
     energy = float(np.sum(residual**2))
-    ranking = []
+    ranking: list[dict[str, Any]] = []
     scored = []
     for reg in candidates:
         edges, index = _bins(reg.values, n_bins)

@@ -73,7 +73,7 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "settings": {"candidates": found.candidates, "effect": found.effect, "window_s": found.window_s,
                      "block_s": found.block_s, "n_folds": found.n_folds, "horizon_s": found.horizon_s,
                      "effective_samples_per_axis": round(selection.n_eff, 1)},
-        "residual_where": {k: v for k, v in found.where_before_.items()},
+        "residual_where": dict(found.where_before_),
         "selection": [{"chosen": step.chosen, "cv_mse_before_N2": step.mse_before, "cv_mse_after_N2": step.mse_after,
                        "tried": step.tried} for step in selection.steps],
         "removed_by_backward_check": selection.removed,

@@ -71,9 +71,9 @@ class Segment:
     measured_force: np.ndarray  # (n, 3) N, y_k: the aerodynamic force the data show
     fold: np.ndarray  # (n,) int, the cross-validation fold each sample is held out in
     train_mask: np.ndarray  # (K, n) bool, samples usable for fitting when fold k is held out
-    p_measured: np.ndarray = field(repr=False, default=None)  # (n, 3) logged (unsmoothed) position
-    p_start: np.ndarray = field(repr=False, default=None)  # (n, 3) position for prediction starts (short smoothing)
-    v_start: np.ndarray = field(repr=False, default=None)  # (n, 3) velocity for prediction starts (short smoothing)
+    p_measured: np.ndarray | None = field(repr=False, default=None)  # (n, 3) logged (unsmoothed) position
+    p_start: np.ndarray | None = field(repr=False, default=None)  # (n, 3) position for prediction starts (short smoothing)
+    v_start: np.ndarray | None = field(repr=False, default=None)  # (n, 3) velocity for prediction starts (short smoothing)
     evaluators: dict = field(default_factory=dict, repr=False)
 
     @property

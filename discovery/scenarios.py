@@ -93,16 +93,21 @@ class SurveyReference(Reference):
         return 2 * math.pi * np.asarray(self.amplitude) / np.asarray(self.period)
 
 
+def _xyz(values: Any) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in values)
+    return x, y, z
+
+
 def survey_for(env: gym.Env, amplitude=(1.6, 2.1, 0.5), period=(5.0, 6.5, 4.0), centre=None,
                duration: float | None = None, lead_in: float = 3.0) -> SurveyReference:
     """A survey for ``env`` about ``centre`` (world, m; default the env reference's start), over its duration,
     gliding in from the env's start point."""
-    base = env.unwrapped.reference
+    unwrapped: Any = env.unwrapped
+    base = unwrapped.reference
     start = base.position(0.0)[0]
     origin = start if centre is None else np.asarray(centre, dtype=float)
-    return SurveyReference(tuple(float(c) for c in origin), float(duration if duration is not None else base.duration),
-                           base.yaw, amplitude=tuple(float(a) for a in amplitude),
-                           period=tuple(float(T) for T in period), start=tuple(float(c) for c in start),
+    return SurveyReference(_xyz(origin), float(duration if duration is not None else base.duration),
+                           base.yaw, amplitude=_xyz(amplitude), period=_xyz(period), start=_xyz(start),
                            lead_in=lead_in)
 
 

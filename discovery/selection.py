@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
@@ -144,7 +145,7 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
         remaining = [n for n in templates if n not in current.names]
         if not remaining:
             break
-        tried = []
+        tried: list[dict[str, Any]] = []
         best = None
         for name in remaining:
             if progress is not None:

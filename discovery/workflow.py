@@ -10,7 +10,7 @@
     found.model_.save("model.json")   # loads in the env (model=...) and in SC-MPC
     found.report()            # the JSON report as a dict
 
-The five steps (issue 5):
+The five steps:
 
 1. **Residuals**: the force residual of paper Eq. 28 at every sample against the
    nominal model (:mod:`discovery.residuals`) and the open-loop prediction error over a

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 
-
 ARM = 0.1 / math.sqrt(2.0)  # the default vehicle's rotor offset along body x (m)
 
 

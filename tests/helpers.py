@@ -17,7 +17,7 @@ def wrench(
     effect: Effect,
     scene: Scene,
     p_world,
-    R_body_to_world=np.eye(3),
+    R_body_to_world=None,
     v_world=(0.0, 0.0, 0.0),
     rotor_thrusts=None,
     vehicle: VehicleParams | None = None,
@@ -28,7 +28,8 @@ def wrench(
     function = model.function(vehicle.rotor_positions_array, scene)
     thrusts = np.full(4, vehicle.hover_thrust / 4) if rotor_thrusts is None else np.asarray(rotor_thrusts, float)
     force, moment, _ = function(
-        np.asarray(p_world, float), np.asarray(R_body_to_world, float), np.asarray(v_world, float), np.zeros(3),
+        np.asarray(p_world, float), np.eye(3) if R_body_to_world is None else np.asarray(R_body_to_world, float),
+        np.asarray(v_world, float), np.zeros(3),
         thrusts, vehicle.mass, model.theta(), scene.to_vector(),
     )
     return np.asarray(force).ravel(), np.asarray(moment).ravel()

@@ -56,7 +56,7 @@ def test_missing_folder_is_named(tmp_path):
         load_policy(missing / "model.zip")
 
 
-@pytest.mark.parametrize("name", ["model.zip", "normalization.json", "policy.json"])
+@pytest.mark.parametrize("name", ["model.zip", "vecnormalize.pkl", "policy.json"])
 def test_missing_file_is_named(checkpoint, tmp_path, name):
     folder = _copy(checkpoint, tmp_path)
     (folder / name).unlink()
@@ -75,26 +75,38 @@ def test_corrupted_model_is_named(checkpoint, tmp_path):
         load_policy(folder / "model.zip")
 
 
-@pytest.mark.parametrize("name", ["normalization.json", "policy.json"])
-def test_corrupted_json_is_named(checkpoint, tmp_path, name):
+@pytest.mark.parametrize("name", ["vecnormalize.pkl", "policy.json"])
+def test_corrupted_statistics_or_description_is_named(checkpoint, tmp_path, name):
     folder = _copy(checkpoint, tmp_path)
-    text = (folder / name).read_text()
-    (folder / name).write_text(text[: len(text) // 3])
+    data = (folder / name).read_bytes()
+    (folder / name).write_bytes(data[: len(data) // 3])
     with pytest.raises(CheckpointError, match=re.escape(str(folder / name)) + ".*corrupted"):
         load_policy(folder)
 
 
 def test_statistics_that_do_not_belong_to_the_model_are_refused(checkpoint, tmp_path):
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from agents.checkpoints import save_vecnormalize, vecnormalize_from_json
+
     folder = _copy(checkpoint, tmp_path)
-    state = json.loads((folder / "normalization.json").read_text())
-    state["obs_mean"] = [m + 0.5 for m in state["obs_mean"]]
-    (folder / "normalization.json").write_text(json.dumps(state))
-    with pytest.raises(CheckpointError, match=re.escape(str(folder / "normalization.json")) + ".*do not belong together"):
+    stats = VecNormalize.load(str(folder / "vecnormalize.pkl"), make_vec_env(default_config("WallHover"), 1, 0))
+    stats.obs_rms.mean = stats.obs_rms.mean + 0.5
+    stats.save(str(folder / "vecnormalize.pkl"))
+    stats.close()
+    with pytest.raises(CheckpointError, match=re.escape(str(folder / "vecnormalize.pkl")) + ".*do not belong together"):
         load_policy(folder)
-    state["obs_mean"] = state["obs_mean"][:10]
-    state["obs_var"] = state["obs_var"][:10]
-    (folder / "normalization.json").write_text(json.dumps(state))
+    from gymnasium import spaces
+
+    state = {"norm_obs": True, "clip_obs": 10.0, "clip_reward": 10.0, "gamma": 0.99, "epsilon": 1e-8,
+             "obs_mean": [0.0] * 10, "obs_var": [1.0] * 10, "obs_count": 1.0, "ret_mean": 0.0, "ret_var": 1.0,
+             "ret_count": 1.0}
+    short = vecnormalize_from_json(state, spaces.Box(-1, 1, (10,)), spaces.Box(-1, 1, (4,)))
+    save_vecnormalize(short, folder / "vecnormalize.pkl")
     with pytest.raises(CheckpointError, match="statistics for 10 observation entries"):
+        load_policy(folder)
+    (folder / "vecnormalize.pkl").write_bytes(__import__("pickle").dumps({"not": "a VecNormalize"}))
+    with pytest.raises(CheckpointError, match="not a VecNormalize pickle"):
         load_policy(folder)
 
 
@@ -104,3 +116,25 @@ def test_task_without_shipped_checkpoint_names_the_expected_folder(monkeypatch, 
     monkeypatch.setattr(agents.policy, "PRETRAINED_DIR", tmp_path / "pretrained")
     with pytest.raises(CheckpointNotFoundError, match=re.escape(str(tmp_path / "pretrained" / "wall_sweep"))):
         load_policy("WallInspector/WallSweep-v0")
+
+
+def test_checkpoint_of_the_earlier_json_format_is_named_and_upgraded_exactly(checkpoint, tmp_path):
+    """How the shipped agents were converted: normalization.json -> vecnormalize.pkl, same actions."""
+    from agents.checkpoints import read_vecnormalize, upgrade_checkpoint
+
+    folder = _copy(checkpoint, tmp_path)
+    stats = read_vecnormalize(folder / "vecnormalize.pkl")
+    (folder / "normalization.json").write_text(json.dumps({
+        "format": 1, "norm_obs": True, "norm_reward": True, "clip_obs": stats.clip_obs, "clip_reward": stats.clip_reward,
+        "epsilon": stats.epsilon, "gamma": stats.gamma, "obs_mean": stats.obs_rms.mean.tolist(),
+        "obs_var": stats.obs_rms.var.tolist(), "obs_count": stats.obs_rms.count, "ret_mean": float(stats.ret_rms.mean),
+        "ret_var": float(stats.ret_rms.var), "ret_count": stats.ret_rms.count}))
+    (folder / "vecnormalize.pkl").unlink()
+    with pytest.raises(CheckpointError, match="earlier format.*upgrade_checkpoint"):
+        load_policy(folder)
+    assert upgrade_checkpoint(folder) == folder / "vecnormalize.pkl"
+    upgraded = read_vecnormalize(folder / "vecnormalize.pkl")
+    np.testing.assert_array_equal(upgraded.obs_rms.mean, stats.obs_rms.mean)  # bit for bit
+    np.testing.assert_array_equal(upgraded.obs_rms.var, stats.obs_rms.var)
+    obs = np.asarray(json.loads((folder / "policy.json").read_text())["check"]["observations"], dtype=np.float32)
+    np.testing.assert_array_equal(load_policy(folder).predict(obs)[0], load_policy(checkpoint).predict(obs)[0])

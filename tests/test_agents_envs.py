@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
-import wall_env  # noqa: F401
+import wall_env
 from agents.config import apply_overrides, default_config, task_env_id, task_name, task_slug
 from agents.envs import env_kwargs, make_env, make_vec_env
 from agents.vec_env import MultiEnvSubprocVecEnv, split_evenly
@@ -100,7 +100,7 @@ def test_multi_env_workers_match_one_process_step_for_step():
         obs_a, obs_b = reference.reset(), workers.reset()
         np.testing.assert_array_equal(obs_a, obs_b)
         ends = 0
-        for step in range(45):
+        for _ in range(45):
             actions = rng.uniform(-0.6, 0.6, (3, 4)).astype(np.float32)
             obs_a, rew_a, done_a, info_a = reference.step(actions)
             obs_b, rew_b, done_b, info_b = workers.step(actions)

@@ -95,7 +95,8 @@ def test_residual_on_pid_if_available():
     except ImportError as exc:
         pytest.skip(f"the PID controller has not landed yet ({exc})")
 
-    def fly(wrapped: bool, correction=np.zeros(4)):
+    def fly(wrapped: bool, correction=(0.0, 0.0, 0.0, 0.0)):
+        correction = np.asarray(correction, dtype=float)
         env = gym.make("WallInspector/WallHover-v0")
         pid = make_base_controller("pid", env)
         if wrapped:
@@ -172,6 +173,7 @@ def test_residual_agent_trains_saves_and_loads_on_pid(tmp_path, monkeypatch):
     shutil.copytree(out / "best", scmpc_dir)
     info = json.loads((scmpc_dir / "policy.json").read_text())
     info["residual"].update(base="scmpc", base_kwargs={"k_s": 4.1, "d_thr": 0.132})
+    info["env_id"] = "WallInspector/WallCircle-v0"  # flown on the circle below (agents are checked against the task)
     (scmpc_dir / "policy.json").write_text(json.dumps(info))
     built = []
     monkeypatch.setattr(agents.residual, "make_base_controller",
@@ -181,4 +183,6 @@ def test_residual_agent_trains_saves_and_loads_on_pid(tmp_path, monkeypatch):
     factory(env, TABLE_I[2])
     factory(env)
     env.close()
-    assert built[-2:] == [("scmpc", {"k_s": 10.0, "d_thr": 0.10}), ("scmpc", {"k_s": 4.1, "d_thr": 0.132})]
+    # (its policy.json names no preset: agents saved before presets existed flew the authors' settings)
+    assert built[-2:] == [("scmpc", {"preset": "paper", "k_s": 10.0, "d_thr": 0.10}),
+                          ("scmpc", {"preset": "paper", "k_s": 4.1, "d_thr": 0.132})]

@@ -27,7 +27,7 @@ TINY = ["--set", "ppo.n_steps=256", "--set", "ppo.batch_size=512", "--set", "ppo
 @pytest.fixture(scope="module")
 def cli_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("runs") / "hover"
-    code = main(["train", "--env", "WallInspector/WallHover-v0", "--timesteps", "3000", "--n-envs", "4",
+    code = main(["train", "--env", "WallInspector/WallHover-v0", "--timesteps", "3072", "--n-envs", "4",
                  "--workers", "2", "--seed", "3", "--out", str(out), *TINY])
     assert code == 0
     return out
@@ -36,7 +36,7 @@ def cli_run(tmp_path_factory):
 def test_cli_run_writes_checkpoints_logs_and_card(cli_run):
     out = cli_run
     for folder in (out, out / "best"):
-        for name in ("model.zip", "normalization.json", "policy.json"):
+        for name in ("model.zip", "vecnormalize.pkl", "policy.json"):
             assert (folder / name).is_file(), folder / name
     assert sorted(p.name for p in (out / "checkpoints").iterdir()) == ["000002048"]
     events = list((out / "tb").rglob("events.out.tfevents*"))
@@ -51,11 +51,11 @@ def test_cli_run_writes_checkpoints_logs_and_card(cli_run):
 
     saved = yaml.safe_load((out / "config.yaml").read_text())
     assert saved["env_id"] == "WallInspector/WallHover-v0"
-    assert (saved["n_envs"], saved["n_workers"], saved["seed"], saved["timesteps"]) == (4, 2, 3, 3000)
+    assert (saved["n_envs"], saved["n_workers"], saved["seed"], saved["timesteps"]) == (4, 2, 3, 3072)
     assert saved["ppo"]["n_steps"] == 256 and saved["ppo"]["gamma"] == default_config("WallHover")["ppo"]["gamma"]
 
     card = json.loads((out / "model_card.json").read_text())
-    assert card["command"].startswith("wall-inspector train --env WallInspector/WallHover-v0 --timesteps 3000 --n-envs 4")
+    assert card["command"].startswith("wall-inspector train --env WallInspector/WallHover-v0 --timesteps 3072 --n-envs 4")
     training = card["training"]
     assert training["total_timesteps"] == 3072 and training["timesteps_this_run"] == 3072
     assert 0 < training["wall_time_s"] < training["command_wall_time_s"]
@@ -92,13 +92,13 @@ def test_policy_factory_gives_a_predictor_for_an_env(cli_run):
     env.close()
 
 
-def test_resume_continues_from_the_latest_checkpoint(cli_run, tmp_path):
+def test_resume_continues_from_the_latest_checkpoint(cli_run, tmp_path, capsys):
     import shutil
 
     run = tmp_path / "hover"
     shutil.copytree(cli_run, run)
     before = json.loads((run / "policy.json").read_text())["num_timesteps"]
-    assert main(["train", "--resume", str(run), "--timesteps", "5000", "--no-progress", "--quiet"]) == 0
+    assert main(["train", "--resume", str(run), "--timesteps", "5120", "--no-progress", "--quiet"]) == 0
     after = json.loads((run / "policy.json").read_text())
     assert before == 3072 and after["num_timesteps"] == 5120
     card = json.loads((run / "model_card.json").read_text())
@@ -106,13 +106,14 @@ def test_resume_continues_from_the_latest_checkpoint(cli_run, tmp_path):
     assert card["training"]["total_wall_time_s"] > card["training"]["wall_time_s"]
     # the evaluation history spans both parts of the run
     assert [row[0] for row in card["training"]["eval_curve"]] == [1024, 2048, 3072, 4096, 5120]
-    with pytest.raises(SystemExit, match="drop --seed"):
-        main(["train", "--resume", str(run), "--timesteps", "9000", "--seed", "1"])
+    capsys.readouterr()
+    assert main(["train", "--resume", str(run), "--timesteps", "9000", "--seed", "1"]) == 2
+    assert "drop --seed" in capsys.readouterr().err
 
 
-def test_refuses_to_overwrite_a_run(cli_run):
-    with pytest.raises(SystemExit, match="already holds a run"):
-        main(["train", "--env", "WallHover-v0", "--out", str(cli_run), "--timesteps", "1000"])
+def test_refuses_to_overwrite_a_run(cli_run, capsys):
+    assert main(["train", "--env", "WallHover-v0", "--out", str(cli_run), "--timesteps", "1000"]) == 2
+    assert "already holds a run" in capsys.readouterr().err
 
 
 def test_loaded_policy_acts_exactly_like_the_trained_model(tmp_path, capsys):
@@ -156,7 +157,7 @@ def test_ship_puts_the_best_checkpoint_and_card_where_load_policy_finds_them(cli
     target = ship(cli_run, "WallInspector/WallHover-v0")
     assert target == tmp_path / "pretrained" / "wall_hover"
     assert sorted(p.name for p in target.iterdir()) == ["model.zip", "model_card.json", "model_card.md",
-                                                       "normalization.json", "policy.json"]
+                                                       "policy.json", "vecnormalize.pkl"]
     shipped = load_policy("WallHover-v0")
     best = load_policy(cli_run / "best")
     obs = np.asarray(json.loads((target / "policy.json").read_text())["check"]["observations"], dtype=np.float32)
@@ -178,3 +179,78 @@ def test_policy_factory_without_source_picks_the_envs_own_task(cli_run, tmp_path
     with pytest.raises(FileNotFoundError, match=re.escape(str(tmp_path / "wall_sweep_residual_pid"))):
         policy_factory(variant="residual_pid")(sweep)
     sweep.close()
+
+
+def test_ctrl_c_saves_everything_and_resume_goes_on_from_the_same_step(tmp_path):
+    """Ctrl-C (SIGINT to the whole process group, workers included, as a terminal sends it) to a
+    real ``wall-inspector train`` process, then ``--resume``."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    command = [sys.executable, "-m", "wall_inspector.cli", "train", "--env", "WallHover-v0", "--timesteps", "1000000",
+               "--n-envs", "2", "--workers", "1", "--set", "ppo.n_steps=256", "--set", "ppo.batch_size=256",
+               "--set", "ppo.n_epochs=1", "--eval-freq", "512", "--eval-episodes", "1", "--no-progress", "--quiet",
+               "--out", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "eval" / "evaluations.npz").exists():  # training is under way
+            assert process.poll() is None and time.monotonic() < deadline, process.communicate()
+            time.sleep(0.1)
+        os.killpg(process.pid, signal.SIGINT)
+        _, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 130, err
+    assert "Traceback" not in err
+    saved = sorted((out / "checkpoints").iterdir())
+    assert len(saved) == 1
+    steps = json.loads((saved[0] / "policy.json").read_text())["num_timesteps"]
+    assert steps >= 512 and saved[0].name == f"{steps:09d}"
+    assert sorted(p.name for p in saved[0].iterdir()) == ["model.zip", "policy.json", "vecnormalize.pkl"]
+    assert f"interrupted at {steps} env steps" in err and f"wall-inspector train --resume {out}" in err
+    load_policy(saved[0])  # a complete, consistent checkpoint
+
+    assert main(["train", "--resume", str(out), "--timesteps", str(steps + 512), "--no-progress", "--quiet"]) == 0
+    card = json.loads((out / "model_card.json").read_text())
+    assert card["training"]["resumed"] and card["training"]["timesteps_this_run"] == 512
+    assert card["training"]["total_timesteps"] == steps + 512  # the count went on from the interrupted one
+    assert json.loads((out / "policy.json").read_text())["num_timesteps"] == steps + 512
+
+
+def test_short_run_keeps_to_its_steps_checkpoints_by_wall_time_and_an_honest_card(tmp_path, capsys):
+    config = default_config("WallHover")
+    config.update(timesteps=1500, n_envs=2, n_workers=1, checkpoint_freq=0, checkpoint_minutes=0.0005)  # 30 ms
+    config["ppo"].update(n_steps=256, batch_size=256, n_epochs=1)
+    config["eval"].update(freq=100_000, episodes=1)  # no evaluation during the run
+    config["card_eval"]["episodes"] = 1
+    trained = train(config, tmp_path / "hover", progress_bar=True, verbose=0)
+    bar = capsys.readouterr().err
+    # whole rollouts of 512 steps within the 1500 asked for: 1024, and the bar ends at its total
+    assert trained.model.num_timesteps == 1024 and trained.card["training"]["total_timesteps"] == 1024
+    assert "1.02k/1.02k" in bar and "1.5k" not in bar and "1.54k" not in bar
+    # checkpoints by wall time although checkpoints by steps are off
+    saved = sorted((tmp_path / "hover" / "checkpoints").iterdir())
+    assert len(saved) >= 2 and all((folder / "vecnormalize.pkl").is_file() for folder in saved)
+    assert "nan" not in trained.card["checkpoint"]
+    assert "no evaluation ran during training" in trained.card["checkpoint"]
+    git = trained.card["training"]
+    if git["git_commit"]:  # inside a checkout: the files that differed are listed, not hidden
+        assert isinstance(git["git_uncommitted"], list)
+        md = (tmp_path / "hover" / "model_card.md").read_text()
+        assert all(name in md for name in git["git_uncommitted"])
+
+
+def test_resumed_run_is_not_shipped_from_a_dirty_tree_either(cli_run, monkeypatch, capsys):
+    import agents.train
+
+    monkeypatch.setattr(agents.train, "git_state", lambda: {"commit": "abc", "uncommitted": ["wall_env/env.py"]})
+    before = sorted(p.name for p in cli_run.rglob("*"))
+    assert main(["train", "--resume", str(cli_run), "--timesteps", "9216", "--ship"]) == 2
+    assert "wall_env/env.py differ from it; commit first" in capsys.readouterr().err
+    assert sorted(p.name for p in cli_run.rglob("*")) == before  # nothing trained, nothing written

@@ -18,11 +18,11 @@ from controllers.mpc.cost import InputLimits, MPCProblem, MPCWeights
 from controllers.mpc.ipopt_reference import IpoptReference
 from controllers.mpc.lm import LevenbergMarquardt, LMSettings
 from controllers.mpc.manifold import POINT_SIZE, boxplus, boxplus_first_order
-from wall_env.rotations import so3_exp, so3_log
 from controllers.policy import SolverFailure
 from wall_env.effects import make_effect
 from wall_env.model_file import FlightModel
 from wall_env.observation import OBSERVATION_FIELDS
+from wall_env.rotations import so3_exp, so3_log
 
 FREE_HOVER = {"standoff": 2.0, "k_s": 0.0}
 

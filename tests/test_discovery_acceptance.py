@@ -1,4 +1,4 @@
-"""Issue 5's acceptance: hidden effects named and fitted, clean logs left alone, two effects found together,
+"""Discovery's acceptance: hidden effects named and fitted, clean logs left alone, two effects found together,
 the paper's identification, the closed-loop check, 50 Hz to 1 kHz logs and a 60 s log.
 
 Every log here is flown by ``discovery.fly`` (the PID from ``controllers``) with the simulator's

@@ -13,8 +13,8 @@ import pytest
 import wall_env  # noqa: F401
 from discovery.flight_log import REQUIRED_COLUMNS, read_log
 from discovery.fly import scenario_path
-from wall_inspector.cli import main
 from wall_env.vehicle import VehicleParams
+from wall_inspector.cli import main
 
 EFFECT_RECORD_KEYS = {"name", "params", "param_std", "where", "explained_fraction"}
 

@@ -95,7 +95,7 @@ def test_suction_pulls_the_open_loop_vehicle_into_the_wall():
     u = env.unwrapped
     standoff = u.standoff
     first = None
-    for step in range(200):
+    for _ in range(200):
         obs, reward, term, trunc, info = env.step(np.zeros(4))
         if first is None:
             first = info

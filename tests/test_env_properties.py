@@ -32,7 +32,7 @@ _NUMERIC_KEYWORDS = ("k_s", "d_thr", "standoff", "altitude", "duration", "thrust
 _RANGE = st.one_of(_ANYTHING, st.tuples(st.floats(allow_nan=True), st.floats(allow_nan=True)),
                    st.tuples(st.floats(0.0, 10.0), st.floats(0.0, 10.0)))
 _KWARGS = st.fixed_dictionaries({}, optional={
-    **{name: _ANYTHING for name in _NUMERIC_KEYWORDS},
+    **dict.fromkeys(_NUMERIC_KEYWORDS, _ANYTHING),
     "reward_weights": st.one_of(_ANYTHING, st.dictionaries(
         st.sampled_from([*DEFAULT_REWARD_WEIGHTS, "bogus"]), _ANYTHING, max_size=3)),
     "randomize": st.one_of(_ANYTHING, st.dictionaries(st.sampled_from([*RANDOMIZABLE, "wind"]), _RANGE, max_size=3)),

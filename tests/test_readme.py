@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -39,3 +40,19 @@ def test_model_cards_become_one_row_each(tmp_path):
     row = [line for line in text.splitlines() if "WallSweep-v0" in line][0]
     assert "| 10,000,000 | 25.0 min | 6,700 | 100 % | 3.10 cm | 2.81 cm | 0 |" in row
     assert "over 10 seeds" in text
+
+
+def _python_block_after(heading: str) -> str:
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = text[text.index(heading):]
+    start = section.index("```python\n") + len("```python\n")
+    return section[start:section.index("```", start)]
+
+
+def test_the_readme_controller_snippet_flies_every_episode_without_contact():
+    # run exactly as printed: SC-MPC (its default, tuned preset) through SB3's evaluate_policy on 4 envs
+    namespace: dict = {}
+    exec(compile(_python_block_after("### Controllers, with Stable-Baselines3's tools"), "README.md", "exec"), namespace)
+    assert namespace["lengths"] == [1700, 1700, 1700, 1700]  # a collision would end an episode early
+    assert namespace["policy"].failures == 0
+    assert namespace["result"].metrics()["episodes"] == 5

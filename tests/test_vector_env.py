@@ -49,6 +49,7 @@ def _fly_both(env_id, seeds, steps, action_fn, **kwargs):
     singles = [gym.make(env_id, **kwargs) for _ in seeds]
     obs_b, info_b = envs.reset(seed=seeds[0])
     single_obs = [env.reset(seed=s)[0] for env, s in zip(singles, seeds)]
+    np.testing.assert_array_equal(obs_b, single_obs)  # the same starts
     rng = np.random.default_rng(99)
     record = {"batched": [], "single": []}
     ended = np.zeros(n, dtype=bool)

@@ -16,7 +16,7 @@ import casadi as ca
 import numpy as np
 
 from wall_env.effects import Effect, FlightContext, Wrench, effects_from_spec, make_effect
-from wall_env.scene import Scene
+from wall_env.scene import Scene, Wall
 from wall_env.vehicle import GRAVITY
 
 __all__ = ["AeroModel"]
@@ -116,7 +116,7 @@ def symbolic_scene(structure: tuple[int, bool, bool]) -> tuple[Any, ca.SX]:
     """Scene symbols for a structure (wall count, has ground, has ceiling)."""
     n_walls, has_ground, has_ceiling = structure
     placeholder = Scene(
-        walls=tuple({"point": (0.0, 0.0, 0.0), "normal": (1.0, 0.0, 0.0)} for _ in range(n_walls)),
+        walls=tuple(Wall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)) for _ in range(n_walls)),
         ground_z=0.0 if has_ground else None,
         ceiling_z=10.0 if has_ceiling else None,
     )

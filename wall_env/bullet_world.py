@@ -17,6 +17,7 @@ import os
 import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -48,9 +49,9 @@ with _quiet_native_output():
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
 
-from wall_env.contact import collision_shapes
-from wall_env.scene import Scene
-from wall_env.vehicle import VehicleParams
+from wall_env.contact import collision_shapes  # noqa: E402 - after the quietened PyBullet import above
+from wall_env.scene import Scene  # noqa: E402
+from wall_env.vehicle import VehicleParams  # noqa: E402
 
 __all__ = ["BulletWorld", "Contact"]
 
@@ -88,11 +89,11 @@ class BulletWorld:
     """One PyBullet client holding one scene and one vehicle."""
 
     def __init__(self, vehicle: VehicleParams, scene: Scene, gui: bool = False):
-        self._client = None
+        self._client: Any = None
         if gui and not os.environ.get("DISPLAY"):
             raise ValueError("render_mode='human' needs a display (DISPLAY is not set); use render_mode='rgb_array'")
         with _quiet_native_output():
-            self._client: BulletClient | None = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
+            self._client = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
         self.client_id = self._client._client
         self.vehicle = vehicle
         self.scene = scene

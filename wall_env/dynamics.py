@@ -284,7 +284,8 @@ class Simulator:
         return (x_next, forces.reshape(3, -1, order="F"), distances.reshape(self.n_walls, 4, order="F"),
                 R.reshape(3, 3, order="F"))
 
-    def hover_state(self, p_world: np.ndarray, q_body_to_world: np.ndarray = (1.0, 0.0, 0.0, 0.0)) -> np.ndarray:
+    def hover_state(self, p_world: np.ndarray,
+                    q_body_to_world: np.ndarray | tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)) -> np.ndarray:
         """A state at rest with every rotor carrying a quarter of the weight."""
         x = np.zeros(STATE_SIZE)
         x[StateIndex.p_world] = p_world

@@ -52,7 +52,7 @@ from gymnasium import spaces
 
 from wall_env.batch import EnvBatch, check_actions, info_row
 from wall_env.bullet_world import BulletWorld
-from wall_env.config import DEFAULT_REWARD_WEIGHTS, EnvConfig, RENDER_MODES, episode_length_warning
+from wall_env.config import DEFAULT_REWARD_WEIGHTS, RENDER_MODES, EnvConfig, episode_length_warning
 from wall_env.observation import OBSERVATION_SIZE, observation_bounds
 
 __all__ = ["WallInspectorEnv", "DEFAULT_REWARD_WEIGHTS", "check_reset_options"]

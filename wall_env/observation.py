@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["observation_bounds", "OBSERVATION_FIELDS", "OBSERVATION_SIZE", "PREVIEW_STEPS", "PREVIEW_DT", "CLEARANCE_CAP", "parse_observation"]
+__all__ = ["observation_bounds", "OBSERVATION_FIELDS", "OBSERVATION_SIZE", "PREVIEW_STEPS", "PREVIEW_DT", "CLEARANCE_CAP",
+           "parse_observation"]
 
 PREVIEW_STEPS = 4
 PREVIEW_DT = 0.05  # s

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 __all__ = ["check_range", "check_positive", "check_vector", "check_finite_array", "read_mapping",
-           "read_json_object"]
+           "read_json_object", "check_output_folder"]
 
 
 def _as_float(name: str, value: Any) -> float:
@@ -82,6 +84,8 @@ def read_mapping(path: str | Path, kind: str, fmt: str | None = None, empty_is_m
         if suffix not in (".json", ".yaml", ".yml"):
             raise ValueError(f"{kind} {path} must end in .json, .yaml or .yml")
         fmt = "json" if suffix == ".json" else "yaml"
+    loads: Any
+    syntax_errors: tuple[type[Exception], ...]
     if fmt == "json":
         loads, syntax_errors = json.loads, (json.JSONDecodeError,)
     else:
@@ -105,3 +109,22 @@ def read_mapping(path: str | Path, kind: str, fmt: str | None = None, empty_is_m
 def read_json_object(path: str | Path, kind: str) -> dict[str, Any]:
     """The JSON object in ``path`` (whatever its suffix); errors name the ``kind`` of file."""
     return read_mapping(path, kind, "json")
+
+
+def check_output_folder(path: str | Path, name: str = "--out") -> Path:
+    """Check that ``path`` is a folder we can write into, or one we can create, without
+    creating it; ``ValueError`` naming ``name`` and the reason otherwise.
+
+    Commands call this before doing any work, so a bad output path fails at once.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{name} {path}: exists and is not a folder")
+    existing = path if path.exists() else next((p for p in path.absolute().parents if p.exists()), Path("/"))
+    if not existing.is_dir():
+        raise ValueError(f"{name} {path}: {existing} is not a folder")
+    try:  # the only sure test (root passes permission checks, virtual file systems refuse anyway)
+        os.rmdir(tempfile.mkdtemp(prefix=".write-test-", dir=existing))
+    except OSError as exc:
+        raise ValueError(f"{name} {path}: cannot create files in {existing} ({exc.strerror or exc})") from None
+    return path

@@ -3,6 +3,12 @@
 Each subcommand lives in the module that owns its work and exposes
 ``add_arguments(parser)`` and ``run(args) -> int``; it is imported only when used,
 so ``wall-inspector bench-env`` never loads PyTorch.
+
+Usage errors look the same for every command: one line on stderr,
+``wall-inspector COMMAND: error: MESSAGE``, and exit status 2. They come from argparse
+(an unknown flag, a value of the wrong type) or from a command's own checks, which a
+command signals by raising ``SystemExit("message")`` before it starts its work. Ctrl-C
+ends a command with status 130 and no traceback (``train`` saves its state first).
 """
 
 from __future__ import annotations
@@ -10,6 +16,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from typing import NoReturn
+
+USAGE_ERROR = 2  # exit status of every usage error (argparse's convention)
+INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT)
 
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -27,8 +37,27 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose errors are one line (no usage block) and exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        usage_error(self.prog, f"{message} (see {self.prog} --help)")
+
+
+def print_usage_error(prog: str, message: str) -> int:
+    """Print ``PROG: error: MESSAGE`` as one line on stderr; return the exit status, 2."""
+    text = " ".join(str(message).split())  # one line, whatever the message held
+    print(f"{prog}: error: {text}", file=sys.stderr)
+    return USAGE_ERROR
+
+
+def usage_error(prog: str, message: str) -> NoReturn:
+    """:func:`print_usage_error`, then exit with status 2."""
+    raise SystemExit(print_usage_error(prog, message))
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="wall-inspector",
         description="Quadrotor flight near walls: environments, controllers, agents and model discovery.",
     )
@@ -43,16 +72,27 @@ def main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
         parser = _parser()
         if argv and argv[0] not in ("-h", "--help"):
-            parser.error(f"unknown command {argv[0]!r}; choose from {', '.join(COMMANDS)}")
+            return print_usage_error(parser.prog, f"unknown command {argv[0]!r}; choose from {', '.join(COMMANDS)}")
         parser.print_help()
         return 0
     name = argv[0]
     module_name, help_text = COMMANDS[name]
     module = importlib.import_module(module_name)
-    parser = argparse.ArgumentParser(prog=f"wall-inspector {name}", description=help_text)
+    prog = f"wall-inspector {name}"
+    parser = OneLineParser(prog=prog, description=help_text)
     module.add_arguments(parser)
-    args = parser.parse_args(argv[1:])
-    return int(module.run(args) or 0)
+    try:
+        args = parser.parse_args(argv[1:])
+        return int(module.run(args) or 0)
+    except SystemExit as exit_:
+        if isinstance(exit_.code, str):  # a command's own usage check: raise SystemExit("message")
+            return print_usage_error(prog, exit_.code)
+        if exit_.code == USAGE_ERROR:  # the parser's, already printed as one line
+            return USAGE_ERROR
+        raise
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -4,22 +4,33 @@ Flies every method on the scenarios of :mod:`controllers.paper_tables` (a progre
 bar counts the flights), prints the Markdown tables and the acceptance checks, and
 writes to ``--out``:
 
-- ``tables.md``: the tables (``wall-inspector readme --set compare=OUT/tables.md``
-  copies them into the README);
-- ``results.json``: pooled and per-flight metrics of every run and the checks;
+- ``tables.md``: the tables, the tuning budgets and the checks
+  (``wall-inspector readme --set compare=OUT/tables.md`` copies them into the README);
+- ``results.json``: pooled and per-flight metrics of every run, the budgets and the checks;
 - ``table_i_circle.png`` (paper Fig. 6) and ``table_ii_sweep.png`` (paper Fig. 10).
 
-The shipped PPO agents (``agents/pretrained``) fly through the same evaluation
-function and seeds: the circle agent in Table I, the sweep agent in Table II, and in
-Table II also the residual agent that corrects SC-MPC ("PPO + SC-MPC"; its SC-MPC base
-keeps the weights it was trained with). ``--no-ppo`` leaves them out.
+Controllers fly the preset of ``--weights`` (:mod:`controllers.presets`): by default
+``tuned``, each method's preset tuned by ``wall-inspector tune`` on the scenario's
+task with the same budget for every method, with the authors' released settings as
+extra rows labelled "(authors')"; SC-MPC flies in both formulations ("SC-MPC" is the
+default ``dynamics+attitude``, "SC-MPC (dynamics only)" the paper's). ``--weights
+paper-sim`` flies the weights that reproduce the paper's Table I and adds the checks
+of that match. The shipped PPO agents (``agents/pretrained``) fly through the same
+evaluation function and seeds: the circle agent in Table I, the sweep agent in Table
+II, and in Table II also the residual agent that corrects SC-MPC ("PPO + SC-MPC"; its
+SC-MPC base keeps the settings it was trained with). ``--no-ppo`` leaves them out. A
+table of each method's optimisation budget (tuning trials, env steps, wall time;
+PPO's training) stands beside the results.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import time
+from pathlib import Path
+from typing import Any
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -29,9 +40,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds-ii", type=int, default=10, help="seeds of Table II (default 10)")
     parser.add_argument("--duration", type=float, default=None,
                         help="shorten every flight to this many seconds (a quick look; not the paper's tables)")
-    parser.add_argument("--weights", choices=("paper", "tuned"), default="paper",
-                        help="MPC and SC-MPC weights: the authors' sigmas (default) or the tuned position sigmas of "
-                             "controllers.mpc.cost.tuned_weights")
+    parser.add_argument("--weights", default="tuned", metavar="PRESET",
+                        help="controller preset: tuned (default; per task and method), paper (the authors' release), "
+                             "paper-sim (reproduces the paper's Table I) or a preset YAML file")
+    parser.add_argument("--no-authors", action="store_true",
+                        help="leave out the extra rows flown with the authors' settings")
     parser.add_argument("--mpc-sigma", action="append", default=[], metavar="NAME=V[/V...]",
                         help="replace one of the MPCs' sigmas (both MPC and SC-MPC), e.g. position=0.07/0.07/0.093; "
                              "names are the fields of controllers.mpc.MPCWeights (sensitivity studies, not the paper)")
@@ -39,37 +52,61 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def _weights(preset: str, items: list[str]):
-    """MPC weights of ``--weights`` with the ``--mpc-sigma`` replacements, and a note saying so
-    (``None, ""`` for the authors' weights)."""
-    from controllers.mpc.cost import MPCWeights, tuned_weights
+class UsageError(ValueError):
+    """A bad command-line value: reported in one line, exit code 2."""
 
-    base = MPCWeights() if preset == "paper" else tuned_weights()
-    base_note = "" if preset == "paper" else (
-        "**Tuned MPC weights** (`--weights tuned`): the authors' sigmas with position sigma "
-        f"{'/'.join(f'{v:.4g}' for v in base.position)} m and terminal position sigma "
-        f"{base.terminal_position[0]:.4g} m instead of 0.15/0.15/0.20 and 0.05 m "
-        "(see `controllers.mpc.cost.tuned_weights`).")
-    if not items:
-        return (None if preset == "paper" else base), base_note
+
+def _sigma_changes(items: list[str]) -> dict[str, Any]:
+    """``--mpc-sigma`` items as replacements of :class:`MPCWeights` fields (checked)."""
+    from controllers.mpc.cost import MPCWeights
+
     fields = {f.name for f in dataclasses.fields(MPCWeights)}
-    changes = {}
+    changes: dict[str, Any] = {}
     for item in items:
         name, sep, values = item.partition("=")
         if not sep or name not in fields:
-            raise SystemExit(f"--mpc-sigma takes NAME=V[/V...] with NAME one of {sorted(fields)}, got {item!r}")
+            raise UsageError(f"--mpc-sigma takes NAME=V[/V...] with NAME one of {sorted(fields)}, got {item!r}")
         try:
             numbers = [float(v) for v in values.split("/")]
         except ValueError:
-            raise SystemExit(f"--mpc-sigma {name}: values must be numbers, got {values!r}") from None
+            raise UsageError(f"--mpc-sigma {name}: values must be numbers, got {values!r}") from None
         changes[name] = numbers[0] if len(numbers) == 1 else tuple(numbers)
     try:
-        weights = dataclasses.replace(base, **changes)
+        dataclasses.replace(MPCWeights(), **changes)
     except ValueError as exc:
-        raise SystemExit(f"--mpc-sigma: {exc}") from None
-    note = ("**Not the authors' MPC weights**: sigmas changed to "
-            + ", ".join(f"{k} = {v}" for k, v in changes.items()) + " (sensitivity study).")
-    return weights, " ".join(filter(None, [base_note, note]))
+        raise UsageError(f"--mpc-sigma: {exc}") from None
+    return changes
+
+
+def _preset_note(preset: str, changes: dict[str, Any]) -> str:
+    from controllers.presets import load_preset
+
+    if preset == "tuned":
+        note = ("**Tuned presets** (`--weights tuned`, the default): each method's gains or sigmas and horizon tuned "
+                "by `wall-inspector tune` on the scenario's task, the same budget for every method (below); rows "
+                "marked (authors') fly the authors' released settings.")
+    elif preset == "paper":
+        note = "**The authors' released settings** (`--weights paper`)."
+    else:
+        loaded = load_preset(preset)
+        note = (f"**Preset `{loaded.name}`** (`--weights {preset}`): {loaded.description}; methods it does not set "
+                "fly the authors' settings; rows marked (authors') fly the authors' released settings.")
+    if changes:
+        note += (" **Not the preset's MPC weights**: sigmas changed to "
+                 + ", ".join(f"{k} = {v}" for k, v in changes.items()) + " (sensitivity study).")
+    return note
+
+
+def _check_preset(preset: str, tasks: list[str]) -> None:
+    """Fail before any flight if the preset cannot be read for the tasks flown."""
+    from controllers import paper_tables as pt
+
+    for task in tasks:
+        for method in ("pid", "mpc", "scmpc"):
+            try:
+                pt._preset_for(preset, method, task)
+            except ValueError as exc:
+                raise UsageError(f"--weights {preset}: {exc}") from None
 
 
 def _ppo_policies(env_id: str, residual: bool) -> dict:
@@ -88,7 +125,7 @@ def _ppo_policies(env_id: str, residual: bool) -> dict:
 
 
 def _ppo_acceptance(results) -> list[dict]:
-    """Issue 4: the shipped sweep agent has at most one collision in the Table II scenario."""
+    """The shipped sweep agent has at most one collision in the Table II scenario."""
     for r in results:
         if r.scenario.table == "II" and r.policy == "PPO":
             m = r.metrics()
@@ -97,32 +134,94 @@ def _ppo_acceptance(results) -> list[dict]:
     return []
 
 
+def budgets(preset: str, tasks: list[str], with_ppo: bool) -> list[dict[str, Any]]:
+    """Each method's optimisation budget per task: the tuning study of its preset, PPO's training."""
+    from controllers import paper_tables as pt
+    from controllers.presets import METHOD_LABELS, load_preset
+
+    rows = []
+    for task in tasks:
+        for method, label in METHOD_LABELS.items():
+            chosen = pt._preset_for(preset, method, task)
+            loaded = load_preset(chosen, method=method, task=task)
+            used = loaded.provenance.get("used") or {}
+            rows.append({"task": task, "method": label, "settings": loaded.name,
+                         "trials": used.get("trials"), "env_steps": used.get("env_steps"),
+                         "wall_time_s": used.get("wall_time_s")})
+        if with_ppo:
+            from agents import pretrained_path
+
+            card_path = pretrained_path(task) / "model_card.json"
+            if card_path.is_file():
+                training = json.loads(card_path.read_text())["training"]
+                rows.append({"task": task, "method": "PPO", "settings": "shipped agent", "trials": None,
+                             "env_steps": training["total_timesteps"], "wall_time_s": training["total_wall_time_s"]})
+    return rows
+
+
+def budget_markdown(rows: list[dict[str, Any]]) -> str:
+    def number(v, fmt):
+        return "-" if v is None else format(v, fmt)
+
+    lines = ["**Optimisation budget** of each method: the tuning study of its preset (`wall-inspector tune`; "
+             "the authors' settings had none here) and PPO's training.", "",
+             "| task | method | settings | tuning trials | env steps | wall time (min) |", "|---|---|---|---:|---:|---:|"]
+    for r in rows:
+        minutes = None if r["wall_time_s"] is None else r["wall_time_s"] / 60
+        lines.append(f"| {r['task']} | {r['method']} | {r['settings']} | {number(r['trials'], 'd')} | "
+                     f"{number(r['env_steps'], ',d')} | {number(minutes, '.1f')} |")
+    return "\n".join(lines) + "\n"
+
+
+
 def run(args: argparse.Namespace) -> int:
     from controllers import paper_tables as pt
 
-    for name in ("seeds_i", "seeds_ii"):
-        if not 1 <= getattr(args, name) <= 1000:
-            raise SystemExit(f"--{name.replace('_', '-')} must be in [1, 1000], got {getattr(args, name)}")
-    extra = {}
-    if args.duration is not None:
-        if not 0.05 <= args.duration <= 3600:
-            raise SystemExit(f"--duration must be in [0.05, 3600] s, got {args.duration}")
-        extra["duration"] = args.duration
-    scenarios = []
-    if args.tables in ("I", "both"):
-        scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_i)), env_kwargs=extra) for s in pt.TABLE_I]
-    if args.tables in ("II", "both"):
-        scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_ii)), env_kwargs=extra) for s in pt.TABLE_II]
-    weights, note = _weights(args.weights, args.mpc_sigma)
+    try:
+        for name in ("seeds_i", "seeds_ii"):
+            if not 1 <= getattr(args, name) <= 1000:
+                raise UsageError(f"--{name.replace('_', '-')} must be in [1, 1000], got {getattr(args, name)}")
+        extra: dict[str, Any] = {}
+        if args.duration is not None:
+            if not 0.05 <= args.duration <= 3600:
+                raise UsageError(f"--duration must be in [0.05, 3600] s, got {args.duration}")
+            extra["duration"] = args.duration
+        changes = _sigma_changes(args.mpc_sigma)
+        scenarios = []
+        if args.tables in ("I", "both"):
+            scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_i)), env_kwargs={**s.env_kwargs, **extra})
+                          for s in pt.TABLE_I]
+        if args.tables in ("II", "both"):
+            scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_ii)),
+                                              env_kwargs={**s.env_kwargs, **extra}) for s in pt.TABLE_II]
+        tasks = sorted({s.env_id.split("/")[-1].removesuffix("-v0") for s in scenarios})
+        _check_preset(args.weights, tasks)
+        out = Path(args.out)
+        if out.exists() and not out.is_dir():
+            raise UsageError(f"--out {out} exists and is not a folder")
+    except UsageError as exc:
+        raise SystemExit(str(exc)) from None  # one line, exit status 2 (wall_inspector.cli)
+
+    mpc_weights = (lambda w: dataclasses.replace(w, **changes)) if changes else None
+    policies = pt.controller_policies(args.weights, mpc_weights=mpc_weights)
+    if args.weights != "paper" and not args.no_authors:
+        policies.update(pt.controller_policies("paper", label_suffix=pt.AUTHORS, dynamics_only=False))
+    note = _preset_note(args.weights, changes)
     t0 = time.perf_counter()
-    policies = pt.paper_policies(weights)
     results = []
     for table in ("I", "II"):
         chosen = [s for s in scenarios if s.table == table]
         if chosen:
-            extra = {} if args.no_ppo else _ppo_policies(chosen[0].env_id, residual=table == "II")
-            results += pt.run_scenarios(chosen, {**policies, **extra}, progress=not args.no_progress)
-    paths = pt.write_outputs(results, args.out, note, extra_checks=_ppo_acceptance(results))
+            ppo = {} if args.no_ppo else _ppo_policies(chosen[0].env_id, residual=table == "II")
+            results += pt.run_scenarios(chosen, {**policies, **ppo}, progress=not args.no_progress)
+    budget_rows = budgets(args.weights, tasks, with_ppo=not args.no_ppo)
+    paths = pt.write_outputs(results, out, note, extra_checks=_ppo_acceptance(results),
+                             table_i_paper_match=args.weights == "paper-sim",
+                             extra_markdown=budget_markdown(budget_rows))
+    data = json.loads(paths["json"].read_text())
+    data["budgets"] = budget_rows
+    data["preset"] = args.weights
+    paths["json"].write_text(json.dumps(data, indent=2))
     print(paths["markdown"].read_text())
     print(f"{len(results)} runs in {time.perf_counter() - t0:.0f} s; wrote " + ", ".join(str(p) for p in paths.values()))
     return 0

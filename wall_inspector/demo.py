@@ -11,15 +11,16 @@ every method's distance from the wall against time.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-import wall_env  # noqa: F401  (registers the environments)
+import wall_env  # registers the environments
+from wall_env.validation import check_output_folder
 
 ENV_ID = "WallInspector/WallSweep-v0"
-SUCTION = {"k_s": 4.1, "d_thr": 0.132}
+SUCTION: dict[str, Any] = {"k_s": 4.1, "d_thr": 0.132}
 
 
 def _policies() -> dict:
@@ -34,13 +35,13 @@ def _policies() -> dict:
         import agents
 
         if agents.pretrained_path(ENV_ID).is_dir():
-            policies["PPO"] = lambda env: agents.load_policy(ENV_ID)
+            policies["PPO"] = lambda env: agents.load_policy(ENV_ID, env=env)
     except ImportError:  # agents needs PyTorch; the demo works without it
         pass
     return policies
 
 
-def fly(make_policy, seed: int, render: bool) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+def fly(make_policy: Any, seed: int, render: bool) -> tuple[dict[str, np.ndarray], Any]:
     env = gym.make(ENV_ID, **SUCTION, terminate_on_collision=False, render_mode="rgb_array" if render else None)
     policy = make_policy(env)
     obs, _ = env.reset(seed=seed)
@@ -70,6 +71,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from matplotlib.figure import Figure
 
+    try:
+        out = check_output_folder(args.out, "--out")  # before the flights, not after them
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
     logs, frame = {}, None
     print(f"{ENV_ID}: k_s = 4.1 N/m, d_thr = 0.132 m, command noise on, seed {args.seed}")
     print(f"  {'method':8s} {'wall-normal RMSE':>17s} {'contact steps':>14s} {'closest duct':>13s}")
@@ -80,7 +85,6 @@ def run(args: argparse.Namespace) -> int:
         rmse = np.sqrt(np.mean((log["x"] - log["x_ref"]) ** 2))
         print(f"  {name:8s} {100 * rmse:14.2f} cm {int(log['contact'].sum()):14d} {100 * log['clearance'].min():10.2f} cm")
 
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     fig = Figure(figsize=(12, 4))
     ax_img, ax_plot = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.5]})

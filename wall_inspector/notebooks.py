@@ -44,9 +44,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import nbformat
+    try:
+        import nbclient  # noqa: F401
+        import nbformat
+    except ImportError as exc:
+        raise SystemExit(f"the notebooks command needs the 'notebooks' extra ({exc.name} is missing): "
+                         "pip install 'wall-inspector[notebooks]' (make test and make demo install it)") from None
 
     paths = [Path(p) for p in args.paths] or sorted(NOTEBOOK_DIR.glob("*.ipynb"))
+    for path in paths:  # all of them checked before the first one runs
+        if not path.is_file() or path.suffix != ".ipynb":
+            raise SystemExit(f"{path}: not a notebook file (.ipynb)")
     for path in paths:
         start = time.perf_counter()
         notebook = execute(path, fast=args.fast, timeout=args.timeout)

@@ -61,14 +61,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="replace block 'agents' with a table of the shipped agents' model cards")
 
 
+def _read(path: Path, argument: str) -> str:
+    try:
+        return path.read_text()
+    except OSError as exc:
+        raise SystemExit(f"{argument}: cannot read {path} ({exc.strerror or exc})") from None
+
+
 def run(args: argparse.Namespace) -> int:
     path = Path(args.readme)
-    text = path.read_text()
+    text = _read(path, f"--readme {path}")  # every input is read and every block found before the README is written
     for item in args.blocks:
         name, sep, file = item.partition("=")
         if not sep:
             raise SystemExit(f"--set takes NAME=FILE, got {item!r}")
-        text = replace_block(text, name, Path(file).read_text())
+        try:
+            text = replace_block(text, name, _read(Path(file), f"--set {item}"))
+        except ValueError as exc:
+            raise SystemExit(f"--set {item}: {exc}") from None
         print(f"{path}: block {name!r} <- {file}")
     if args.agents:
         from agents.policy import PRETRAINED_DIR

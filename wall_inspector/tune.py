@@ -47,6 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="environment keyword, e.g. k_s=10 or standoff=0.14 (repeatable)")
     parser.add_argument("--sampler-seed", type=int, default=0, help="seed of the TPE sampler (default 0)")
+    parser.add_argument("--start", action="append", default=[], metavar="PRESET",
+                        help="also fly this preset's settings first (a name or file; repeatable); the authors' "
+                             "settings are always the first trial")
     parser.add_argument("--out", default=None, help="run folder (default runs/tune/<task>_<method>)")
     parser.add_argument("--ship", action="store_true", help="copy the preset into controllers/presets")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -87,18 +90,13 @@ def _env_kwargs(items: list[str]) -> dict:
     return out
 
 
-def _error(message: str) -> int:
-    print(f"wall-inspector tune: error: {message}", file=sys.stderr)
-    return 2
-
 
 def run(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
     import wall_env  # noqa: F401  (registers the environments)
-    from controllers.presets import PRESET_DIR, tuned_preset_path
+    from controllers.presets import PRESET_DIR, load_preset, tuned_preset_path
     from controllers.tuning import SearchSpace, Tuner, default_objective
-    from controllers.presets import load_preset
     from wall_env.tasks import task_env_id, task_slug
 
     # ---------------------------------------------------------- every argument checked before any work
@@ -126,19 +124,21 @@ def run(args: argparse.Namespace) -> int:
         space_method = "mpc" if method == "mpc+scmpc" else method
         space = SearchSpace(space_method, load_preset("paper", method=space_method).methods[space_method],
                             tune_dt=not args.fixed_dt, horizon_steps=tuple(steps))
+        for start in args.start:
+            load_preset(start, method=space_method)
         slug = "paper_table_i" if method == "mpc+scmpc" else f"{task_slug(env_id)}_{method}"
         out = Path(args.out) if args.out else Path("runs") / "tune" / slug
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out} exists and is not a folder")
     except (ValueError, TypeError) as exc:
-        return _error(str(exc))
+        raise SystemExit(str(exc)) from None  # one line, exit status 2 (wall_inspector.cli)
 
     command = "wall-inspector tune " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 1 \
         and sys.argv[1] == "tune" else f"wall-inspector tune --env {env_id} --method {method}"
     objective = default_objective(args.objective, env_id, method, train, env_kwargs)
     tuner = Tuner(objective, heldout, out, budget_trials=args.budget_trials,
                   budget_minutes=args.budget_minutes or None, seed=args.sampler_seed, space=space, command=command,
-                  progress=not args.no_progress)
+                  progress=not args.no_progress, start=args.start)
     try:
         result = tuner.run()
     except KeyboardInterrupt:

@@ -35,8 +35,9 @@ adds ``wall_suction`` (and whatever else a model file holds). No force formula i
 written here. The paper's Eq. 13 has no moment, and the inputs are body rates, so
 the model's moment is not used.
 
-Weights are ``1 / sigma^2`` with the authors' released standard deviations
-(``../shared/notes/reference-numbers.md``). The control-limit sigma is not in
+Weights are ``1 / sigma^2``; the defaults are the authors' released standard
+deviations (the ``paper`` preset, :mod:`controllers.presets`; the tuned presets
+replace them). The control-limit sigma is not in
 their notes; 0.01 (in the input's unit) is our choice, which makes a 0.1 N or
 0.1 rad/s violation cost as much as a 1.5 m position error at one stage. The
 thrust penalty starts ``thrust_margin`` = 1 N inside ``[5, 27] N`` as theirs does.
@@ -50,19 +51,20 @@ functions, so changing them never regenerates code; only the model's structure
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from controllers.mpc.manifold import POINT_SIZE, unpack_point
-from wall_env.rotations import so3_log
 from wall_env.aero import AeroModel, symbolic_scene
 from wall_env.effects import FlightContext
+from wall_env.rotations import so3_log
 from wall_env.scene import Scene
 from wall_env.validation import check_range, check_vector
 from wall_env.vehicle import GRAVITY, VehicleParams
 
-__all__ = ["MPCWeights", "tuned_weights", "InputLimits", "MPCProblem", "RESIDUAL_SIZE", "STAGE_PARAM_SIZE"]
+__all__ = ["MPCWeights", "InputLimits", "MPCProblem", "RESIDUAL_SIZE", "STAGE_PARAM_SIZE"]
 
 RESIDUAL_SIZE = 29  # dynamics 9, reference 9, terminal 3, rate 4, limit 4
 STAGE_PARAM_SIZE = 17  # p_ref 3, v_ref 3, R_ref 9, terminal flag, rate flag
@@ -97,8 +99,8 @@ class MPCWeights:
         sizes = {"position": 3, "rotation": 3, "velocity": 3, "terminal_position": 3, "dynamics": 9,
                  "control_rate": 4, "control_limit": 4}
         for name, size in sizes.items():
-            value = getattr(self, name)
-            if np.isscalar(value):
+            value: Any = getattr(self, name)
+            if isinstance(value, (int, float, np.floating, np.integer)):
                 value = (float(value),) * size
             object.__setattr__(self, name, check_vector(f"weights.{name}", value, size, low=1e-9, high=1e9))
 
@@ -112,23 +114,6 @@ class MPCWeights:
             self.control_limit,
         ])
         return 1.0 / sigmas
-
-
-def tuned_weights() -> MPCWeights:
-    """The authors' sigmas with the position sigmas scaled by 0.467 (0.15 -> 0.07 m).
-
-    In this simulator, with the paper's command noise, the authors' weights leave the
-    lateral loop weak and lightly damped (about 6 N/m per kg, damping ratio about 0.05,
-    measured), less stiff than the suction's own gradient near the wall (2 k_s = 8.2 N/m
-    on the sweep), so both MPCs end up touching the wall. A sweep of the position sigma
-    (0.15, 0.10, 0.07, 0.05, 0.03 m) gave 13, 4, 0, 0, 0 SC-MPC contact steps on Table II;
-    0.07 m is the smallest change that removes them. Every other sigma, the horizon and the
-    limits stay the authors'. ``wall-inspector compare --weights tuned`` uses it.
-    """
-    scale = 0.07 / 0.15
-    defaults = MPCWeights()
-    return MPCWeights(position=tuple(scale * s for s in defaults.position),
-                      terminal_position=tuple(scale * s for s in defaults.terminal_position))
 
 
 @dataclass(frozen=True)

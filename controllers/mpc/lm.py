@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -69,7 +70,7 @@ def _cholesky_lower(S_lower: list[list]) -> list[list]:
 def _forward_substitute(L: ca.SX, B: ca.SX) -> ca.SX:
     """``L^{-1} B`` for lower-triangular ``L``."""
     n = L.shape[0]
-    rows = []
+    rows: list[Any] = []
     for i in range(n):
         acc = B[i, :]
         for k in range(i):
@@ -316,8 +317,8 @@ class LevenbergMarquardt:
         converged = False
         iterations = 0
         for iterations in range(1, limit + 1):
-            Z_trial, c, c_trial, pred, _, step = self.iteration(Z, start, S, g, lam)
-            c, c_trial, pred, step = float(c[0]), float(c_trial[0]), float(pred[0]), float(step[0])
+            Z_trial, c_out, c_trial_out, pred_out, _, step_out = self.iteration(Z, start, S, g, lam)
+            c, c_trial, pred, step = float(c_out[0]), float(c_trial_out[0]), float(pred_out[0]), float(step_out[0])
             if iterations == 1:
                 initial_cost = c
                 history.append(c)

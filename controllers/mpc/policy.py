@@ -203,7 +203,7 @@ class MPC(ControllerPolicy):
         refs = self.horizon_reference.build(memory["reference"], float(fields["time"]), p - fields["p_error"],
                                             memory["attitude_global"], p_pred, v_pred)
         S = self.problem.stage_params(refs.p_world, refs.v_world, refs.R_body_to_world)
-        Z0 = self.initial_guess(refs) if cold else Z_warm
+        Z0 = self.initial_guess(refs) if cold or Z_warm is None else Z_warm
         start = pack_point(np.zeros(4), p, R, v)  # its input slot is unused: no rate residual at stage 0
         t_solve, cpu_solve = time.perf_counter(), time.thread_time()
         result = self.solver.solve(Z0, start, S, memory["global"], cold=cold)

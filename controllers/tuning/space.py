@@ -9,7 +9,7 @@ PID (6 parameters): position gain ``kp`` (xy, z) in [1, 80] 1/s^2, velocity gain
 
 MPC and SC-MPC (7 sigmas and the horizon): position (xy, z) in [0.01, 0.5] m,
 terminal position in [0.005, 0.5] m, roll/pitch rotation in [0.05, 5] rad,
-velocity in [0.05, 10] m/s, control rate of the thrust in [0.02, 2] N and of the
+velocity in [0.05, 30] m/s, control rate of the thrust in [0.02, 2] N and of the
 roll/pitch rates in [0.01, 1] rad/s. The yaw rotation (0.03 rad), yaw-rate rate
 (0.01 rad/s), dynamics (1e-4) and control-limit (0.01) sigmas stay the authors'
 (the yaw does not move the vehicle, and the dynamics and limit sigmas make soft
@@ -33,7 +33,7 @@ PID_RANGES = {
 }
 MPC_RANGES = {
     "position_xy": (0.01, 0.5), "position_z": (0.01, 0.5), "terminal_position": (0.005, 0.5),
-    "rotation_xy": (0.05, 5.0), "velocity": (0.05, 10.0),
+    "rotation_xy": (0.05, 5.0), "velocity": (0.05, 30.0),
     "control_rate_thrust": (0.02, 2.0), "control_rate_xy": (0.01, 1.0),
 }
 DT_RANGE = (0.01, 0.03)  # s

@@ -28,6 +28,7 @@ from typing import Any
 
 from controllers.presets import METHOD_LABELS, ControllerPreset, load_preset
 from controllers.tuning.objective import (
+    ALONG_WALL_PRICE,
     CONTACT_PRICE_CM,
     RATE_EFFORT_PRICE_CM,
     THRUST_EFFORT_PRICE_CM,
@@ -100,12 +101,14 @@ class Tuner:
     seed: seed of the TPE sampler.
     space: the search space (default: the method's, from the authors' settings).
     command: the command line recorded in the provenance.
+    base_preset: the settings the first trial flies and that unsearched values keep (the authors').
+    start: further presets (names or files) whose settings are flown as the next trials.
     """
 
     def __init__(self, objective: TrackingObjective | PaperTableIObjective, heldout_seeds: Sequence[int],
                  run_dir: str | Path, *, budget_trials: int | None = 50, budget_minutes: float | None = None,
                  seed: int = 0, space: SearchSpace | None = None, command: str = "", progress: bool = True,
-                 base_preset: str | Path = "paper"):
+                 base_preset: str | Path = "paper", start: Sequence[str | Path] = ()):
         if budget_trials is None and budget_minutes is None:
             raise ValueError("give a budget: budget_trials and/or budget_minutes")
         if budget_trials is not None and (isinstance(budget_trials, bool) or not 1 <= int(budget_trials) <= 100000):
@@ -125,6 +128,7 @@ class Tuner:
         space_method = "mpc" if self.method == "mpc+scmpc" else self.method
         self.base = load_preset(base_preset, method=space_method)
         self.space = space or SearchSpace(space_method, self.base.methods[space_method])
+        self.start = [load_preset(p, method=space_method) for p in start]
         self.command = command
         self.progress = progress
 
@@ -143,6 +147,7 @@ class Tuner:
         recorded = study.user_attrs.get("signature")
         if recorded is None:
             study.set_user_attr("signature", signature)
+            study.set_user_attr("commit", git_commit())  # the code the study runs (a resume may run later code)
         elif recorded != signature:
             raise ValueError(f"{self.run_dir} holds a study of {recorded}, not of {signature}; "
                              "use another --out folder")
@@ -173,8 +178,9 @@ class Tuner:
         optuna.logging.set_verbosity(optuna.logging.WARNING)
         study = self._study()
         if not study.trials:
-            study.enqueue_trial(self.space.values_of(self.base.methods[self.space.method]),
-                                user_attrs={"start": "the authors' settings"})
+            for preset in [self.base, *self.start]:
+                study.enqueue_trial(self.space.values_of(preset.methods[self.space.method]),
+                                    user_attrs={"start": f"preset {preset.name}"})
         done, _, _ = self._done(study)
         left_trials, left_seconds = self.remaining(study)
         total = self.budget_trials if self.budget_trials is not None else None
@@ -239,8 +245,9 @@ class Tuner:
             "budget": {"trials": self.budget_trials, "minutes": self.budget_minutes},
             "used": {"trials": trials, "env_steps": env_steps, "wall_time_s": round(wall_time, 1)},
             "sampler": f"optuna TPESampler(seed={self.seed}), MedianPruner(n_startup_trials=8)",
+            "start": [{"preset": p.name, "settings": p.methods[self.space.method]} for p in [self.base, *self.start]],
             "command": self.command,
-            "commit": git_commit(),
+            "commit": study.user_attrs.get("commit") or git_commit(),
             "date": time.strftime("%Y-%m-%d", time.gmtime()),
         }
         name = "paper-sim" if self.objective.name == "paper-table-i" else \
@@ -262,7 +269,8 @@ class Tuner:
         if self.objective.name == "paper-table-i":
             return ("over Table I's MPC (k_s 1, 4, 10 N/m) and SC-MPC (k_s 10 N/m) cells: max |ln(wall-normal RMSE "
                     "/ paper RMSE)| + 0.1 mean ln(wall-normal RMSE / paper RMSE)^2")
-        return (f"mean over flights of wall-normal RMSE (cm) + {CONTACT_PRICE_CM} cm per contact step + "
+        return (f"mean over flights of wall-normal RMSE (cm) + {ALONG_WALL_PRICE} x RMSE along the wall (cm) + "
+                f"{CONTACT_PRICE_CM} cm per contact step + "
                 f"{RATE_EFFORT_PRICE_CM} cm per rad/s RMS body-rate command + {THRUST_EFFORT_PRICE_CM} cm per N "
                 "RMS thrust command away from hover")
 
