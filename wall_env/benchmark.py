@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 import wall_env
+from wall_env.validation import check_output_folder
 
 TARGET_STEPS_PER_S = 5000.0
 TARGET_RESET_MS = 1.0
@@ -97,6 +98,17 @@ def run(args: argparse.Namespace) -> int:
     unknown = [env_id for env_id in args.envs if env_id not in wall_env.ENV_IDS]
     if unknown:
         raise SystemExit(f"unknown environment id(s) {unknown}; known: {list(wall_env.ENV_IDS)}")
+    for flag in ("json", "markdown", "plot"):  # output paths are checked before minutes of measuring
+        value = getattr(args, flag, None)
+        if value:
+            if os.path.isdir(value):
+                raise SystemExit(f"--{flag} {value}: is a folder; give a file name")
+            try:
+                check_output_folder(os.path.dirname(os.path.abspath(value)), f"--{flag}")
+            except ValueError as exc:
+                raise SystemExit(str(exc)) from None
+    if args.plot and not args.batched:
+        raise SystemExit("--plot draws the batched env's scaling curve: use it with --batched")
     if args.batched:
         if any(n < 1 for n in args.sizes) or args.batched_steps < 1 or args.two_core_n < 0 or args.memory_resets < 0:
             raise SystemExit("--sizes and --batched-steps must be positive, --two-core-n and --memory-resets >= 0")

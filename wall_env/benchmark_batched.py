@@ -12,7 +12,7 @@ one run:
   time (env steps of both over the wall time of the slower);
 * the resident memory before and after ``--memory-resets`` resets of a batch of 1,024.
 
-Targets (issue figures): >= 100,000 steps/s at N = 1024 in one process and >= 20x the
+Targets: >= 100,000 steps/s at N = 1024 in one process and >= 20x the
 single env; >= 200,000 with two processes; reset <= 1 ms per 1,000 envs. The
 table goes to the terminal (and ``--markdown``), the figures to ``--json`` and the
 scaling curve to ``--plot``.
