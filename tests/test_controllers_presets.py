@@ -15,6 +15,7 @@ from controllers import MPC, PID, SCMPC
 from controllers.mpc.policy import COMPENSATION_MODES
 from controllers.presets import METHODS, ControllerPreset, load_preset, tuned_preset_path
 from controllers.stiffness import damping_from_overshoot, side_push_response
+from wall_env.observation import parse_observation
 from wall_env.tasks import TASKS
 from wall_env.vehicle import GRAVITY
 
@@ -178,7 +179,8 @@ def test_controllers_follow_a_randomised_corridor_at_each_episode_start():
         for i in range(2):
             assert policy._memory[i]["scene"] == scenes[i] and pid._memory[i]["scene"] == scenes[i]
             base = vec_env.envs[i].unwrapped
-            p, R = base._x[:3], base._R
+            state = parse_observation(obs[i])  # the env's true position and attitude at the start
+            p, R = state["p_world"], state["R_body_to_world"]
             force = np.asarray(policy.problem.aero_force_function()(
                 p, R.ravel(order="F"), np.zeros(3), [9.81, 0, 0, 0], policy._memory[i]["global"])).ravel()
             expected = _hand_suction(p, R, scenes[i].walls, base.vehicle.rotor_positions_array)
