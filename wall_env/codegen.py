@@ -90,6 +90,16 @@ def _load(function: ca.Function, extra_source: str = "", flags: tuple[str, ...] 
         return library
 
 
+def _check_dense(function: ca.Function) -> None:
+    """Compiled calls pass flat buffers, so every input and output must be dense."""
+    for i in range(function.n_in()):
+        if not function.sparsity_in(i).is_dense():
+            raise ValueError(f"input {function.name_in(i)!r} of {function.name()!r} must be dense")
+    for i in range(function.n_out()):
+        if not function.sparsity_out(i).is_dense():
+            raise ValueError(f"output {function.name_out(i)!r} of {function.name()!r} must be dense")
+
+
 class CompiledFunction:
     """A dense CasADi function evaluated as native code.
 
@@ -100,12 +110,7 @@ class CompiledFunction:
     """
 
     def __init__(self, function: ca.Function):
-        for i in range(function.n_in()):
-            if not function.sparsity_in(i).is_dense():
-                raise ValueError(f"input {function.name_in(i)!r} of {function.name()!r} must be dense")
-        for i in range(function.n_out()):
-            if not function.sparsity_out(i).is_dense():
-                raise ValueError(f"output {function.name_out(i)!r} of {function.name()!r} must be dense")
+        _check_dense(function)
         self.function = function
         self._inputs = [np.zeros(function.nnz_in(i)) for i in range(function.n_in())]
         self._outputs = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
@@ -182,12 +187,7 @@ class BatchedFunction:
     """
 
     def __init__(self, function: ca.Function):
-        for i in range(function.n_in()):
-            if not function.sparsity_in(i).is_dense():
-                raise ValueError(f"input {function.name_in(i)!r} of {function.name()!r} must be dense")
-        for i in range(function.n_out()):
-            if not function.sparsity_out(i).is_dense():
-                raise ValueError(f"output {function.name_out(i)!r} of {function.name()!r} must be dense")
+        _check_dense(function)
         self.function = function
         self.nnz_in = [function.nnz_in(i) for i in range(function.n_in())]
         self.nnz_out = [function.nnz_out(i) for i in range(function.n_out())]

@@ -42,11 +42,10 @@ from discovery.flight_log import FlightLog, LogFormatError, NominalVehicle, Thru
 from discovery.importers.frames import attitude_frd_ned_to_flu_enu, frd_to_flu, ned_to_enu
 from discovery.importers.resample import (
     Signal,
-    common_clock,
+    gap_free_clock,
     hold,
     interpolate,
     interpolate_attitude,
-    valid_mask,
 )
 from discovery.importers.thrust_map import apply_thrust_map, fit_thrust_map
 from wall_env.scene import Scene
@@ -156,13 +155,7 @@ def read_ulog(path: str | Path, vehicle: NominalVehicle, scene: Scene, gravity: 
     if not MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ:
         raise ValueError(f"--rate must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz:g}")
     commands = [rates_cmd, collective] + ([motors[0]] if motors else [])
-    t = common_clock(states + commands, rate_hz)
-    ok = np.ones(len(t), dtype=bool)
-    for signal in states:
-        ok &= valid_mask(signal, t)
-    for signal in commands:
-        ok &= valid_mask(signal, t, hold_s=3.0 / max(signal.rate_hz, 1e-9))
-    t = t[ok]
+    t, dropped = gap_free_clock(states, commands, rate_hz)
     if len(t) < 2:
         raise LogFormatError(f"{path}: the topics never overlap without gaps; nothing to import")
 
@@ -194,7 +187,7 @@ def read_ulog(path: str | Path, vehicle: NominalVehicle, scene: Scene, gravity: 
         "file": str(path),
         "rate_hz": round(rate_hz, 3),
         "samples": int(len(t)),
-        "dropped_in_gaps": int((~ok).sum()),
+        "dropped_in_gaps": dropped,
         "frames": "NED world / FRD body converted to ENU world / FLU body",
         "signals": {"position": position_src, "attitude": attitude_src, "body_rates": rates_src,
                     "body_rate_commands": rates_cmd_src, "collective_command": collective_src,

@@ -85,6 +85,22 @@ def valid_mask(signal: Signal, t: np.ndarray, gap_factor: float = GAP_FACTOR, ho
     return ok
 
 
+def gap_free_clock(states: list[Signal], commands: list[Signal], rate_hz: float) -> tuple[np.ndarray, int]:
+    """Ticks at ``rate_hz`` where every state is sampled without a gap and every command is held,
+    and how many ticks of the common span fell in gaps.
+
+    A command stays valid for three of its own sample periods after its last sample; no
+    ticks at all means the topics never overlap without a gap.
+    """
+    t = common_clock(states + commands, rate_hz)
+    ok = np.ones(len(t), dtype=bool)
+    for signal in states:
+        ok &= valid_mask(signal, t)
+    for signal in commands:
+        ok &= valid_mask(signal, t, hold_s=3.0 / max(signal.rate_hz, 1e-9))
+    return t[ok], int((~ok).sum())
+
+
 def interpolate(signal: Signal, t: np.ndarray) -> np.ndarray:
     """Linear interpolation of every column at ``t`` ``(n, k)``."""
     return np.column_stack([np.interp(t, signal.t, column) for column in signal.values.T])

@@ -30,11 +30,10 @@ from discovery.flight_log import FlightLog, LogFormatError, NominalVehicle, Thru
 from discovery.importers.frames import attitude_frd_ned_to_flu_enu, frd_to_flu, ned_to_enu
 from discovery.importers.resample import (
     Signal,
-    common_clock,
+    gap_free_clock,
     hold,
     interpolate,
     interpolate_attitude,
-    valid_mask,
 )
 from discovery.importers.thrust_map import apply_thrust_map, fit_thrust_map
 
@@ -212,13 +211,7 @@ def read_bag(path: str | Path, vehicle: NominalVehicle, scene: Any, gravity: flo
         rate_hz = float(np.clip(position.rate_hz, MIN_RATE_HZ, MAX_RATE_HZ))
     if not MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ:
         raise ValueError(f"--rate must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz:g}")
-    t = common_clock(states + commands, rate_hz)
-    ok = np.ones(len(t), dtype=bool)
-    for s in states:
-        ok &= valid_mask(s, t)
-    for s in commands:
-        ok &= valid_mask(s, t, hold_s=3.0 / max(s.rate_hz, 1e-9))
-    t = t[ok]
+    t, dropped = gap_free_clock(states, commands, rate_hz)
     if len(t) < 2:
         raise LogFormatError(f"{path}: the topics never overlap without gaps; nothing to import")
     p = interpolate(position, t)
@@ -251,7 +244,7 @@ def read_bag(path: str | Path, vehicle: NominalVehicle, scene: Any, gravity: flo
     log = FlightLog(t=t, p_world=p, v_world=v, q_body_to_world=q, omega_body=omega, thrust_cmd=np.clip(u, 0.0, None),
                     omega_cmd_body=omega_cmd, vehicle=vehicle, scene=scene, gravity=gravity, source=str(path))
     info = {"format": "ROS 2 bag", "file": str(path), "rate_hz": round(rate_hz, 3), "samples": int(len(t)),
-            "dropped_in_gaps": int((~ok).sum()), "frames": "as logged (ENU/FLU)" if topics["frame"] == "enu" else
+            "dropped_in_gaps": dropped, "frames": "as logged (ENU/FLU)" if topics["frame"] == "enu" else
             "NED world / FRD body converted to ENU world / FLU body",
             "signals": {k: topics[k] for k in TOPIC_KEYS if k in topics},
             "signal_rates_hz": {s.name: round(s.rate_hz, 2) for s in states + commands},
