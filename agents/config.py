@@ -51,7 +51,10 @@ _BASE: dict[str, Any] = {
     "timesteps": 1_000_000,
     "seed": 0,
     "n_envs": 32,  # environments in the vector env (16 per worker: IPC and SB3 overhead amortised)
-    "n_workers": 2,  # processes that run them (n_envs / n_workers environments each)
+    "n_workers": 2,  # processes that run them (n_envs / n_workers environments each; vector: subprocess)
+    # "batched": every env in one batched env in the learner's process (one compiled call per step);
+    # "subprocess": n_envs single envs in n_workers processes. Residual agents always use subprocess.
+    "vector": "batched",
     "torch_threads": 1,  # PyTorch threads in the learner process
     "ppo": {
         "n_steps": 128,  # per environment per rollout: n_envs * n_steps = 4096 transitions per update
@@ -212,6 +215,8 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
         raise ValueError(f"policy.net_arch must be a list of positive layer widths, got {policy['net_arch']!r}")
     if policy["activation"] not in _ACTIVATIONS:
         raise ValueError(f"policy.activation must be one of {_ACTIVATIONS}, got {policy['activation']!r}")
+    if config["vector"] not in ("batched", "subprocess"):
+        raise ValueError(f"vector must be 'batched' or 'subprocess', got {config['vector']!r}")
     if config["residual"] not in _RESIDUAL_BASES:
         raise ValueError(f"residual must be one of {_RESIDUAL_BASES}, got {config['residual']!r}")
     scale = config["residual_scale"]

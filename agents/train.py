@@ -93,7 +93,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", help="task, e.g. WallInspector/WallSweep-v0 (or WallSweep-v0, wall_sweep)")
     parser.add_argument("--timesteps", type=int, help="total env steps (default: the task's config)")
     parser.add_argument("--n-envs", type=int, help="environments in the vector env (default: config, 32)")
-    parser.add_argument("--workers", type=int, help="worker processes running them (default: config, 2)")
+    parser.add_argument("--workers", type=int, help="worker processes running them with --vector subprocess "
+                                                    "(default: config, 2)")
+    parser.add_argument("--vector", choices=["batched", "subprocess"],
+                        help="batched: all envs in one batched env in this process (default); subprocess: single envs "
+                             "in --workers processes (residual agents always)")
     parser.add_argument("--seed", type=int, help="random seed (default: config, 0)")
     parser.add_argument("--out", help="run folder for checkpoints, logs and the model card")
     parser.add_argument("--config", help="YAML configuration instead of agents/configs/<task>.yaml")
@@ -129,6 +133,7 @@ def _config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         config = default_config(args.env)
     flags = {
         "timesteps": args.timesteps, "n_envs": args.n_envs, "n_workers": args.workers, "seed": args.seed,
+        "vector": args.vector,
         "randomize": args.randomize, "checkpoint_freq": args.checkpoint_freq,
         "checkpoint_minutes": args.checkpoint_minutes,
         "residual": None if args.residual == "none" else args.residual,
@@ -167,8 +172,8 @@ def _command(args: argparse.Namespace, config: dict[str, Any]) -> str:
         parts = ["wall-inspector", "train", "--resume", args.resume, "--timesteps", str(config["timesteps"])]
     else:
         parts = ["wall-inspector", "train", "--env", config["env_id"], "--timesteps", str(config["timesteps"]),
-                 "--n-envs", str(config["n_envs"]), "--workers", str(config["n_workers"]), "--seed", str(config["seed"]),
-                 "--out", str(args.out)]
+                 "--n-envs", str(config["n_envs"]), "--vector", config["vector"], "--workers", str(config["n_workers"]),
+                 "--seed", str(config["seed"]), "--out", str(args.out)]
         if args.config:
             parts += ["--config", args.config]
         parts.append("--randomize" if config["randomize"] else "--no-randomize")  # explicit: some tasks default to on
@@ -190,6 +195,11 @@ def _command(args: argparse.Namespace, config: dict[str, Any]) -> str:
 
 
 # ---------------------------------------------------------------------- pieces of a run
+def vector_kind(config: dict[str, Any]) -> str:
+    """The vector env a run uses: the configured one, but subprocess for residual agents."""
+    return "subprocess" if config["residual"] else config.get("vector", "batched")
+
+
 def policy_description(config: dict[str, Any]) -> dict[str, Any]:
     """What ``policy.json`` says about every checkpoint of this configuration."""
     residual = None
@@ -335,7 +345,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         out.mkdir(parents=True, exist_ok=True)
         save_config(config, out / "config.yaml")
 
-    venv = make_vec_env(config, config["n_envs"], config["n_workers"])
+    venv = make_vec_env(config, config["n_envs"], config["n_workers"], vector=vector_kind(config))
     eval_env = None
     try:
         train_env = VecNormalize(venv, norm_obs=norm["norm_obs"], norm_reward=norm["norm_reward"],
@@ -349,8 +359,9 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         else:
             model = _make_ppo(config, train_env, out / "tb", verbose)
 
-        eval_env = VecNormalize(make_vec_env(config, 1, 0), training=False, norm_obs=norm["norm_obs"], norm_reward=False,
-                                clip_obs=float(norm["clip_obs"]))
+        # the same wrappers as the training env (sync_envs_normalization walks both stacks)
+        eval_env = VecNormalize(make_vec_env(config, 1, 0, vector=vector_kind(config)), training=False,
+                                norm_obs=norm["norm_obs"], norm_reward=False, clip_obs=float(norm["clip_obs"]))
         eval_env.seed(int(config["eval"]["seed"]))
         clock = TrainingClock(previous_wall)
         best = SaveBestCheckpoint(out / "best", description, clock, checks)
@@ -364,9 +375,12 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                 evaluation.evaluations_timesteps = [int(t) for t in history["timesteps"]]
                 evaluation.evaluations_results = [list(r) for r in history["results"]]
                 evaluation.evaluations_length = [list(n) for n in history["ep_lengths"]]
+        from agents.timing import TimeSplit
+
+        time_split = TimeSplit(venv.unwrapped if hasattr(venv, "unwrapped") else venv)
         periodic = PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks,
                                       every_s=60.0 * float(config["checkpoint_minutes"]), on_save=on_checkpoint)
-        callbacks = [evaluation, CollisionLog(), periodic]
+        callbacks = [time_split, evaluation, CollisionLog(), periodic]
         if progress_bar:
             callbacks.append(ProgressBar(target_steps, initial=start_steps))
 
@@ -397,8 +411,10 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         "wall_time_s": round(run_time, 2),
         "total_wall_time_s": round(total_time, 2),
         "steps_per_s": round(steps_this_run / max(run_time, 1e-9), 1),
+        "time_split": time_split.split(),
         "n_envs": config["n_envs"],
-        "n_workers": config["n_workers"],
+        "vector": vector_kind(config),
+        "n_workers": config["n_workers"] if vector_kind(config) == "subprocess" else 0,
         "seed": config["seed"],
         "resumed": bool(resume),
         "machine": _machine(),

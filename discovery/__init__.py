@@ -23,7 +23,11 @@ Command line: ``wall-inspector fly`` records logs from the simulator and
 :mod:`~discovery.regressors`, :mod:`~discovery.fitting`, :mod:`~discovery.selection`,
 :mod:`~discovery.workflow`, :mod:`~discovery.report`, :mod:`~discovery.plots`,
 :mod:`~discovery.closed_loop`, :mod:`~discovery.fly`, :mod:`~discovery.scenarios`,
-:mod:`~discovery.cli`.
+:mod:`~discovery.cli`; beside them :mod:`~discovery.importers` (PX4 ULog and ROS 2 bags,
+``wall-inspector import-log`` in :mod:`~discovery.import_log`), :mod:`~discovery.coverage`
+(what a flight can and cannot tell), :mod:`~discovery.determination` (only determined
+parameters reach the model file) and :mod:`~discovery.hidden_effects` (hidden-effect logs
+for ``wall-inspector bench-discover --acceptance``).
 """
 
 from discovery.flight_log import FlightLog, LogFormatError, NominalVehicle, read_log, write_log

@@ -4,6 +4,7 @@
 
     wall-inspector discover flight.csv [more.csv ...] --out results/ [--json report.json]
                             [--effect wall_suction] [--closed-loop]
+    wall-inspector discover flight.ulg --vehicle vehicle.yaml --scene scene.yaml --out results/
 
 Writes into ``--out``: ``model.json`` (the nominal vehicle plus the named effects with
 fitted parameters and standard errors; ``gym.make(..., model="model.json")`` and
@@ -15,13 +16,18 @@ flies nominal MPC and SC-MPC from the discovered model in the log's world
 (:mod:`discovery.closed_loop`); the world comes from ``--scenario`` or the
 ``<log>.scenario.json`` that ``wall-inspector fly`` writes.
 
-Exit status 0 on success, 2 when a log or an argument is unusable (the message names
-the file, column or key, and row).
+A PX4 ULog or a ROS 2 bag is imported first (:mod:`discovery.importers`, as
+``wall-inspector import-log`` does) with the vehicle and scene files of ``--vehicle``
+and ``--scene``. Outputs and options are checked before any work.
+
+Exit status 0 on success, 2 when a log or an argument is unusable (one line naming
+the file, column or key, and row, or the option and its allowed range).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -32,13 +38,19 @@ from wall_env.effects import EFFECTS
 
 __all__ = ["add_arguments", "run", "OUTPUT_FILES"]
 
-OUTPUT_FILES = ("model.json", "report.json", "residual_vs_regressor.png", "residual_time.png", "prediction.png")
+OUTPUT_FILES = ("model.json", "report.json", "residual_vs_regressor.png", "residual_time.png", "prediction.png",
+                "unexplained_shape.png")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("logs", nargs="+", metavar="LOG.csv", help="flight logs (each with its .json sidecar)")
+    parser.add_argument("logs", nargs="+", metavar="LOG",
+                        help="flight logs: CSV (each with its .json sidecar), PX4 ULog (.ulg) or ROS 2 bags "
+                             "(the latter two with --vehicle and --scene)")
     parser.add_argument("--out", required=True, help="folder for model.json, report.json and the figures")
     parser.add_argument("--json", default=None, help="also write the report to this file")
+    parser.add_argument("--vehicle", default=None, help="vehicle file (YAML) for .ulg logs and bags")
+    parser.add_argument("--scene", default=None, help="scene file (YAML) for .ulg logs and bags")
+    parser.add_argument("--topics", default=None, help="ROS 2 topic map (YAML) for bags")
     parser.add_argument("--effect", choices=sorted(EFFECTS), default=None,
                         help="fit only this effect (the paper's identification for wall_suction)")
     parser.add_argument("--candidates", default=None,
@@ -60,12 +72,50 @@ def _fail(message: str) -> int:
     return 2
 
 
+def _output_problem(out: Path, json_path: Path | None) -> str | None:
+    """Why the outputs cannot be written (checked before any work), or None."""
+    if out.exists() and not out.is_dir():
+        return f"--out {out} exists and is not a folder; --out names a folder for model.json, report.json and figures"
+    parent = out
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        return f"--out {out}: cannot create or write into {parent}"
+    if json_path is not None:
+        if json_path.is_dir():
+            return f"--json {json_path} is a folder; give a file path"
+        if json_path.suffix.lower() != ".json":
+            return f"--json must be a .json path, got {json_path}"
+    return None
+
+
+def _read_logs(args: argparse.Namespace) -> list:
+    from discovery.importers import import_log, is_importable
+
+    logs = []
+    for name in args.logs:
+        if is_importable(name):
+            if not (args.vehicle and args.scene):
+                raise ValueError(f"{name} is a PX4 ULog or ROS 2 bag: give the nominal vehicle and the scene with "
+                                 "--vehicle VEHICLE.yaml --scene SCENE.yaml")
+            log, _ = import_log(name, args.vehicle, args.scene, topics=args.topics)
+            logs.append(log)
+        else:
+            logs.append(read_log(name))
+    return logs
+
+
 def run(args: argparse.Namespace) -> int:
     from discovery.report import build_report, format_summary, write_report
     from discovery.workflow import Discovery
 
     started = time.perf_counter()
     out = Path(args.out)
+    problem = _output_problem(out, Path(args.json) if args.json else None)
+    if problem:
+        return _fail(problem)
+    if args.closed_loop_seeds < 1:
+        return _fail(f"--closed-loop-seeds must be at least 1, got {args.closed_loop_seeds}")
     inputs = []
     for name in args.logs:
         path = Path(name)
@@ -75,23 +125,28 @@ def run(args: argparse.Namespace) -> int:
     clashes = [str(p) for p in outputs if p.resolve() in resolved_inputs]
     if clashes:
         return _fail(f"output file(s) {clashes} would overwrite an input; choose another --out or --json")
-    try:
-        logs = [read_log(name) for name in args.logs]
-    except (LogFormatError, FileNotFoundError) as exc:
-        return _fail(str(exc))
-    candidates = None
-    if args.candidates:
-        candidates = [c.strip() for c in args.candidates.split(",") if c.strip()]
     settings = {}
     if args.window is not None:
         settings["window_s"] = args.window
     if args.horizon is not None:
         settings["horizon_s"] = args.horizon
+    candidates = None
+    if args.candidates:
+        candidates = [c.strip() for c in args.candidates.split(",") if c.strip()]
     say = None if args.quiet else (lambda text: print(f"  {text}", file=sys.stderr))
     try:
-        found = Discovery(candidates, args.effect, progress=say, **settings).fit(logs)
+        workflow = Discovery(candidates, args.effect, progress=say, **settings)
     except ValueError as exc:
+        option = str(exc).replace("window_s", "--window").replace("horizon_s", "--horizon")
+        return _fail(option)
+    try:
+        logs = _read_logs(args)
+    except (LogFormatError, FileNotFoundError, ValueError) as exc:
         return _fail(str(exc))
+    try:
+        found = workflow.fit(logs)
+    except ValueError as exc:
+        return _fail(str(exc).replace("window_s", "--window").replace("horizon_s", "--horizon"))
     out.mkdir(parents=True, exist_ok=True)
     model_path = out / "model.json"
     found.model_.save(model_path)
@@ -107,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
             say(f"closed-loop check in {scenario_file}")
         closed_loop = closed_loop_check(model_path, load_scenario(scenario_file),
                                         seeds=range(args.closed_loop_seeds), duration=args.closed_loop_duration)
-    if not args.no_plots:
+    if not args.no_plots and found.usable_:
         from discovery.plots import plot_all
 
         plot_all(found, out)

@@ -168,7 +168,7 @@ class EffectFit:
     """
 
     def __init__(self, data: FlightData, effects: list[Effect], nominal_residual: list[np.ndarray],
-                 terms: dict[str, _Term] | None = None):
+                 terms: dict[Any, _Term] | None = None):
         self.data = data
         self.templates = list(effects)
         self.rows = [seg.fit_rows for seg in data.segments]
@@ -177,9 +177,10 @@ class EffectFit:
         cache = terms if terms is not None else {}
         self.terms = []
         for effect in effects:
-            if effect.name not in cache:
-                cache[effect.name] = _Term(data, effect)
-            self.terms.append(cache[effect.name])
+            key: Any = (effect.name, tuple(sorted(effect.option_values.items())))  # forms of one effect differ
+            if key not in cache:
+                cache[key] = _Term(data, effect)
+            self.terms.append(cache[key])
         self.sizes = [t.size for t in self.terms]
         self.low = np.concatenate([t.low for t in self.terms]) if self.terms else np.zeros(0)
         self.high = np.concatenate([t.high for t in self.terms]) if self.terms else np.zeros(0)

@@ -29,13 +29,20 @@ segments that are processed separately.
 The JSON file::
 
     {"vehicle": {"mass": kg, "rotor_positions": [[x, y, z] x 4] (m, body frame),
-                 "drag": [dx, dy, dz] (N s/m, optional, zero if absent)},
+                 "drag": [dx, dy, dz] (N s/m, optional, zero if absent),
+                 "thrust_map": {"kind", "coefficient", "source"} (optional, see ThrustMap)},
      "scene": {"walls": [{"point": [x, y, z], "normal": [nx, ny, nz]}, ...],
                "ground_z": number or null, "ceiling_z": number or null},
      "gravity": 9.81}
 
 The vehicle block is the nominal model the user believes in; nothing in it says what
-is missing. ``gravity`` is optional (9.81 m/s^2 if absent); every other key shown is
+is missing. ``thrust_map`` records how an imported log's normalised commands became the
+thrust in newtons (:mod:`discovery.importers`); it is information, the CSV's thrust is
+already in newtons.
+
+The CSV is UTF-8 (a byte-order mark, as spreadsheets write, is dropped) with ``,``
+between fields; a header separated by ``;``, tabs or ``|`` is rejected with a message
+that names the separator. ``gravity`` is optional (9.81 m/s^2 if absent); every other key shown is
 required, and any other key is rejected.
 
 :func:`read_log` rejects a malformed log with a :class:`LogFormatError` whose message
@@ -49,6 +56,7 @@ import csv
 import io
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,11 +75,16 @@ __all__ = [
     "MIN_RATE_HZ",
     "MAX_RATE_HZ",
     "LogFormatError",
+    "THRUST_MAP_KINDS",
+    "ThrustMap",
     "NominalVehicle",
     "FlightLog",
     "read_log",
     "write_log",
     "sidecar_path",
+    "parse_sidecar",
+    "csv_output_problem",
+    "read_vehicle_and_scene",
 ]
 
 REQUIRED_COLUMNS = (
@@ -92,6 +105,30 @@ class LogFormatError(ValueError):
     """A flight log that does not follow the format; the message names file, column or key, and row."""
 
 
+THRUST_MAP_KINDS = {
+    "collective": "collective thrust (N) = coefficient x normalised collective thrust command (0..1)",
+    "motor_command": "rotor thrust (N) = coefficient x normalised motor command (0..1)",
+    "motor_command_squared": "rotor thrust (N) = coefficient x normalised motor command squared "
+                             "(command proportional to rotor speed)",
+}
+
+
+@dataclass(frozen=True)
+class ThrustMap:
+    """How a log's normalised commands become thrust in newtons (part of the nominal model).
+
+    ``kind`` is one of :data:`THRUST_MAP_KINDS`; ``source`` says where the coefficient
+    comes from (``given``, ``fitted on hover segments``, a parameter of the log).
+    """
+
+    kind: str
+    coefficient: float
+    source: str = "given"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "coefficient": self.coefficient, "source": self.source}
+
+
 @dataclass(frozen=True)
 class NominalVehicle:
     """The vehicle block: what the user believes about the vehicle (SI, body frame)."""
@@ -99,6 +136,7 @@ class NominalVehicle:
     mass: float  # kg
     rotor_positions: tuple[tuple[float, float, float], ...]  # m, 4 x 3, body frame
     drag: tuple[float, float, float] = (0.0, 0.0, 0.0)  # N s/m, body-frame linear drag (paper Eq. 4)
+    thrust_map: ThrustMap | None = field(default=None, compare=False)  # how commands became newtons (import)
 
     @property
     def rotor_positions_array(self) -> np.ndarray:
@@ -121,7 +159,10 @@ class NominalVehicle:
         return cls(float(vehicle.mass), rotors, drag)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"mass": self.mass, "rotor_positions": [list(r) for r in self.rotor_positions], "drag": list(self.drag)}
+        data = {"mass": self.mass, "rotor_positions": [list(r) for r in self.rotor_positions], "drag": list(self.drag)}
+        if self.thrust_map is not None:
+            data["thrust_map"] = self.thrust_map.to_dict()
+        return data
 
 
 @dataclass
@@ -242,15 +283,40 @@ def read_log(path: str | Path) -> FlightLog:
     return _assemble(csv_path, columns, vehicle, scene, gravity)
 
 
+def _read_text(path: Path) -> str:
+    """The file's text; a UTF-8 byte-order mark (as spreadsheet exports write) is dropped."""
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as handle:  # read-only
+            return handle.read()
+    except UnicodeDecodeError as exc:
+        raise LogFormatError(f"{path}: byte {exc.start} is not UTF-8 text; a flight log is a UTF-8 "
+                             "(or ASCII) CSV file") from None
+
+
+def _separator_hint(path: Path, header_line: str) -> None:
+    """Reject a header that uses another field separator than ',' with a message that says so."""
+    if "," in header_line:
+        return
+    for separator, name in ((";", "';' (semicolon)"), ("\t", "a tab"), ("|", "'|'")):
+        if separator in header_line and "t" in (h.strip() for h in header_line.split(separator)):
+            raise LogFormatError(f"{path}: line 1 (header): fields are separated by {name}; the flight-log "
+                                 "format separates fields with ',' (in a spreadsheet, export as CSV with "
+                                 "comma as the separator and '.' as the decimal mark)")
+
+
 def _read_columns(path: Path) -> dict[str, np.ndarray]:
-    with open(path, newline="") as handle:  # read-only
-        text = handle.read()
+    text = _read_text(path)
+    if "\x00" in text:
+        raise LogFormatError(f"{path}: contains NUL characters; a flight log is a text CSV file")
+    _separator_hint(path, text.split("\n", 1)[0])
     reader = csv.reader(io.StringIO(text))
     try:
         header = next(reader)
     except StopIteration:
         raise LogFormatError(
             f"{path}: the file is empty; expected a header row with columns {list(REQUIRED_COLUMNS)}") from None
+    except csv.Error as exc:
+        raise LogFormatError(f"{path}: line 1 (header): not a readable CSV row ({exc})") from None
     header = [h.strip() for h in header]
     duplicates = sorted({h for h in header if header.count(h) > 1})
     if duplicates:
@@ -266,7 +332,11 @@ def _read_columns(path: Path) -> dict[str, np.ndarray]:
             raise LogFormatError(f"{path}: line 1 (header): optional columns {list(group)} come all together; "
                                  f"has {present} but not column(s) {absent}")
     rows: list[tuple[int, list[str]]] = []
-    for line_number, row in enumerate(reader, start=2):
+    try:
+        numbered = list(enumerate(reader, start=2))
+    except csv.Error as exc:
+        raise LogFormatError(f"{path}: line {reader.line_num}: not a readable CSV row ({exc})") from None
+    for line_number, row in numbered:
         if not row or all(not cell.strip() for cell in row):
             continue
         if len(row) != len(header):
@@ -321,8 +391,9 @@ def _assemble(path: Path, c: dict[str, np.ndarray], vehicle: NominalVehicle, sce
         raise LogFormatError(f"{path}: column 't': median sample rate {rate:.1f} Hz is outside the supported "
                              f"{MIN_RATE_HZ:g} Hz to {MAX_RATE_HZ:g} Hz")
     q = np.column_stack([c[k] for k in ("qw", "qx", "qy", "qz")])
-    norms = np.linalg.norm(q, axis=1)
-    bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_TOLERANCE)
+    with np.errstate(over="ignore"):  # a huge component gives norm inf, rejected below
+        norms = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(~(np.abs(norms - 1.0) <= QUATERNION_TOLERANCE))
     if bad.size:
         i = int(bad[0])
         raise LogFormatError(f"{path}: line {lines[i]} (sample {i + 1}), columns 'qw, qx, qy, qz': quaternion norm "
@@ -355,7 +426,8 @@ def _assemble(path: Path, c: dict[str, np.ndarray], vehicle: NominalVehicle, sce
 
 # ---------------------------------------------------------------------- the JSON sidecar
 _SCHEMA_TOP = {"vehicle": True, "scene": True, "gravity": False}  # key -> required
-_SCHEMA_VEHICLE = {"mass": True, "rotor_positions": True, "drag": False}
+_SCHEMA_VEHICLE = {"mass": True, "rotor_positions": True, "drag": False, "thrust_map": False}
+_SCHEMA_THRUST_MAP = {"kind": True, "coefficient": True, "source": False}
 _SCHEMA_SCENE = {"walls": True, "ground_z": True, "ceiling_z": True}
 _SCHEMA_WALL = {"point": True, "normal": True}
 
@@ -375,7 +447,8 @@ class _Sidecar:
         return ""
 
     def fail(self, key: str, message: str) -> LogFormatError:
-        return LogFormatError(f"{self.path}: key '{key}'{self._line_of(key)}: {message}")
+        shown = key if key.isprintable() else repr(key)[1:-1]  # a key with a line break stays on one line
+        return LogFormatError(f"{self.path}: key '{shown}'{self._line_of(key)}: {message}")
 
     def mapping(self, key: str, value: Any, schema: dict[str, bool]) -> dict[str, Any]:
         if not isinstance(value, dict):
@@ -412,12 +485,36 @@ def _type_name(value: Any) -> str:
 
 
 def _read_sidecar(path: Path) -> tuple[NominalVehicle, Scene, float]:
-    with open(path) as handle:  # read-only
-        text = handle.read()
+    text = _read_text(path)
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise LogFormatError(f"{path}: line {exc.lineno}: not valid JSON ({exc.msg})") from None
+    return parse_sidecar(path, text, data)
+
+
+def read_vehicle_and_scene(vehicle_path: str | Path, scene_path: str | Path) -> tuple[NominalVehicle, Scene, float]:
+    """The nominal vehicle and the scene from two YAML (or JSON) files, checked like a sidecar's blocks.
+
+    The vehicle file holds the sidecar's ``vehicle`` block (``mass``, ``rotor_positions``,
+    optional ``drag`` and ``thrust_map``); the scene file the ``scene`` block (``walls``,
+    ``ground_z``, ``ceiling_z``) and optionally ``gravity``. Importers use them for logs
+    that carry neither (PX4 ULog, ROS 2 bags).
+    """
+    from wall_env.validation import read_mapping
+
+    vehicle = read_mapping(vehicle_path, "vehicle file")
+    scene = read_mapping(scene_path, "scene file")
+    gravity = scene.pop("gravity", None)
+    data: dict[str, Any] = {"vehicle": vehicle, "scene": scene}
+    if gravity is not None:
+        data["gravity"] = gravity
+    text = Path(vehicle_path).read_text() + "\n" + Path(scene_path).read_text()
+    return parse_sidecar(Path(f"{vehicle_path} + {scene_path}"), text, data)
+
+
+def parse_sidecar(path: Path, text: str, data: Any) -> tuple[NominalVehicle, Scene, float]:
+    """Check a parsed sidecar document (``text`` only serves line numbers in messages)."""
     check = _Sidecar(path, text)
     check.mapping("", data, _SCHEMA_TOP)
     vehicle_data = check.mapping("vehicle", data["vehicle"], _SCHEMA_VEHICLE)
@@ -445,7 +542,18 @@ def _read_sidecar(path: Path) -> tuple[NominalVehicle, Scene, float]:
     if ground_z is not None and ceiling_z is not None and ceiling_z <= ground_z:
         raise check.fail("scene.ceiling_z", f"must be above scene.ground_z = {ground_z}, got {ceiling_z}")
     gravity = check.number("gravity", data["gravity"], 0.1, 100.0) if "gravity" in data else GRAVITY
-    vehicle = NominalVehicle(mass, rotor_positions, drag)
+    thrust_map = None
+    if "thrust_map" in vehicle_data:
+        tm = check.mapping("vehicle.thrust_map", vehicle_data["thrust_map"], _SCHEMA_THRUST_MAP)
+        kind = tm["kind"]
+        if kind not in THRUST_MAP_KINDS:
+            raise check.fail("vehicle.thrust_map.kind", f"must be one of {list(THRUST_MAP_KINDS)}, got {kind!r}")
+        coefficient = check.number("vehicle.thrust_map.coefficient", tm["coefficient"], 1e-9, 1e9)
+        source = tm.get("source", "given")
+        if not isinstance(source, str):
+            raise check.fail("vehicle.thrust_map.source", f"must be a string, got {_type_name(source)}")
+        thrust_map = ThrustMap(kind, coefficient, source)
+    vehicle = NominalVehicle(mass, rotor_positions, drag, thrust_map)
     try:
         vehicle.to_vehicle_params()
     except ValueError as exc:
@@ -454,6 +562,28 @@ def _read_sidecar(path: Path) -> tuple[NominalVehicle, Scene, float]:
 
 
 # ====================================================================== writing
+def csv_output_problem(out: str | Path, overwrite: bool = False, extra: tuple[Path, ...] = ()) -> str | None:
+    """Why a log cannot be written to ``out`` (one line naming the option), or None; checked before any work.
+
+    ``extra``: other files the command writes beside the log.
+    """
+    path = Path(out)
+    if path.suffix.lower() != ".csv":
+        return f"--out must be a .csv path (the JSON sidecar goes beside it), got {path}"
+    if path.is_dir():
+        return f"--out {path} is a folder; give a .csv file path"
+    if not overwrite:
+        for target in (path, sidecar_path(path), *extra):
+            if target.exists():
+                return f"{target} exists; pass --overwrite to replace it or choose another --out"
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        return f"--out {path}: cannot create or write into {parent}"
+    return None
+
+
 def write_log(log: FlightLog, path: str | Path, *, overwrite: bool = False, precision: int = 9) -> tuple[Path, Path]:
     """Write ``log`` as ``path`` (CSV) and its JSON sidecar; returns both paths.
 

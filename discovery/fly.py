@@ -47,7 +47,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 import wall_env  # noqa: F401  (registers the environments)
-from discovery.flight_log import FlightLog, NominalVehicle, write_log
+from discovery.flight_log import FlightLog, NominalVehicle, csv_output_problem, write_log
 from discovery.scenarios import SCENARIOS, Retarget, survey_for
 from wall_env.effects import Effect, effects_from_spec
 from wall_env.vehicle import VehicleParams
@@ -266,6 +266,10 @@ def fly(env_id: str | None = None, policy: str = "pid", effects: Any = None, see
     other arguments. Returns the log and a summary (steps, collisions, the true effect
     forces per step, the scenario record).
     """
+    if out is not None:
+        problem = csv_output_problem(out, overwrite, (scenario_path(out),))
+        if problem:
+            raise (FileExistsError if "exists" in problem else ValueError)(problem)
     env_kwargs = dict(env_kwargs or {})
     policy_kwargs = dict(policy_kwargs or {})
     if scenario is not None:
@@ -361,6 +365,10 @@ def run(args: argparse.Namespace) -> int:
         if not isinstance(parsed[option], dict):
             print(f"fly: --{option.replace('_', '-')} must be a JSON object", file=sys.stderr)
             return 2
+    problem = csv_output_problem(args.out, args.overwrite, (scenario_path(args.out),))
+    if problem:
+        print(f"fly: {problem}", file=sys.stderr)
+        return 2
     env_kwargs, policy_kwargs, survey = parsed["env_kwargs"], parsed["policy_kwargs"], parsed["survey"]
     noise = MeasurementNoise().scaled(args.noise_scale) if args.noise_scale > 0 else None
     try:

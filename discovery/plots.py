@@ -127,4 +127,25 @@ def plot_all(found, out_dir: str | Path) -> list[Path]:
     path = out / "prediction.png"
     fig.savefig(path, dpi=90)
     written.append(path)
+    # ---------------------------------------------------------------- shape of an unexplained residual
+    shape = (found.unexplained_ or {}).get("shape")
+    if shape:
+        reg = regs[shape["regressor"]]
+        direction = np.asarray(shape["direction_world"], dtype=float)
+        fig = Figure(figsize=(6.5, 4.0))
+        ax = fig.add_subplot()
+        sample = _thin(len(after))
+        ax.plot(reg.values[sample], (after @ direction)[sample], ".", ms=2, alpha=0.3, color="0.5",
+                label="held-out residual along its mean direction")
+        ax.plot(shape["knots"], shape["force_N_at_knots"], "o-", color="C3",
+                label=f"piecewise-linear shape ({100 * shape['explained_fraction']:.0f} % explained)")
+        ax.set_xlabel(f"{shape['regressor']} ({shape['unit']})")
+        ax.set_ylabel("force (N)")
+        ax.set_title("unexplained residual: no effect of the library fits it")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        path = out / "unexplained_shape.png"
+        fig.savefig(path, dpi=110)
+        written.append(path)
+
     return written

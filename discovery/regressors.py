@@ -31,7 +31,7 @@ import numpy as np
 
 from discovery.residuals import FlightData
 
-__all__ = ["Regressor", "regressors", "localise_residual", "describe_force", "time_intervals"]
+__all__ = ["Regressor", "regressors", "localise_residual", "describe_force", "time_intervals", "piecewise_linear"]
 
 N_BINS = 10
 _TIE = 1e-3  # scores closer than this (or 1 % of the best) are a tie, settled by _pick
@@ -261,3 +261,26 @@ def describe_force(data: FlightData, force: np.ndarray, candidates: list[Regress
     inside = reg.values[acting & np.isfinite(reg.values)]
     value_range = [round(float(inside.min()), 4), round(float(inside.max()), 4)] if inside.size else None
     return {"regressor": reg.name, "unit": reg.unit, "range": value_range, "r2": round(r2, 3), **common}
+
+
+def piecewise_linear(x: np.ndarray, y: np.ndarray, n_knots: int = 8) -> dict | None:
+    """A shape-free description of ``y`` against ``x``: the least-squares piecewise-linear curve.
+
+    Knots sit at quantiles of the finite ``x`` (so every piece holds data); the curve is
+    the sum of hat functions at the knots with least-squares heights. Returns
+    ``{"knots": [...], "values": [...], "explained_fraction"}`` or None when ``x`` has
+    too few distinct values.
+    """
+    finite = np.isfinite(x) & np.isfinite(y)
+    if finite.sum() < 2 * n_knots:
+        return None
+    xs, ys = x[finite], y[finite]
+    knots = np.unique(np.quantile(xs, np.linspace(0.0, 1.0, n_knots)))
+    if len(knots) < 2:
+        return None
+    basis = np.column_stack([np.interp(xs, knots, np.eye(len(knots))[k]) for k in range(len(knots))])
+    heights, *_ = np.linalg.lstsq(basis, ys, rcond=None)
+    fitted = basis @ heights
+    total = float(np.sum(ys**2))
+    return {"knots": [round(float(k), 5) for k in knots], "values": [round(float(v), 5) for v in heights],
+            "explained_fraction": round(1.0 - float(np.sum((ys - fitted) ** 2)) / total, 4) if total > 0 else 0.0}

@@ -20,6 +20,17 @@ Keys:
     candidate explains, with where it is (regressor, range, direction, times).
 ``closed_loop``
     ``null``, or the closed-loop check (:mod:`discovery.closed_loop`).
+``undetermined``
+    parameters the flight did not determine (:mod:`discovery.determination`): value,
+    standard error, why, what was done (nulled or the effect left out of the model
+    file) and the manoeuvre that would determine it.
+``alike``
+    candidates the flight could not tell apart, with the manoeuvre that would.
+``notes``
+    what was left out of the logs and why (e.g. time resting on the ground).
+``limits``
+    effects the flight could not determine, each ``{"effects", "reason", "manoeuvre"}``
+    with the manoeuvre that would determine them (:mod:`discovery.coverage`).
 ``details``
     what the run saw and did: logs, settings, where the nominal residual was, the
     selection rounds, runtime.
@@ -33,6 +44,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from discovery.determination import separating_manoeuvre
 
 __all__ = ["build_report", "write_report", "format_summary"]
 
@@ -67,9 +80,14 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
             "explained_fraction": round(float(found.explained_fraction_.get(effect.name, 0.0)), 4),
         })
     selection = found.selection_
+    if selection is None:  # nothing to fit
+        report = {"effects": [], "gap_before": found.gap_before_, "gap_after": found.gap_after_,
+                  "model": None if model_path is None else str(model_path), "unexplained": None,
+                  "closed_loop": closed_loop, "notes": list(found.notes_), "limits": list(found.limits_),
+                  "details": {"logs": _logs(found), "runtime_s": round(found.runtime_s_, 3)}}
+        return _clean(report)
     details = {
-        "logs": [{"file": log.source, "samples": log.n_samples, "duration_s": round(log.duration, 3),
-                  "rate_hz": round(log.rate_hz, 2)} for log in found.logs_],
+        "logs": _logs(found),
         "settings": {"candidates": found.candidates, "effect": found.effect, "window_s": found.window_s,
                      "block_s": found.block_s, "n_folds": found.n_folds, "horizon_s": found.horizon_s,
                      "effective_samples_per_axis": round(selection.n_eff, 1)},
@@ -77,6 +95,7 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "selection": [{"chosen": step.chosen, "cv_mse_before_N2": step.mse_before, "cv_mse_after_N2": step.mse_after,
                        "tried": step.tried} for step in selection.steps],
         "removed_by_backward_check": selection.removed,
+        "forms_chosen": selection.forms,
         "prediction_windows": int(len(found.prediction_errors_before_)),
         "runtime_s": round(found.runtime_s_, 3),
     }
@@ -87,9 +106,25 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "model": None if model_path is None else str(model_path),
         "unexplained": found.unexplained_,
         "closed_loop": closed_loop,
+        "notes": list(found.notes_),
+        "limits": list(found.limits_),
+        "undetermined": [{k: v for k, v in case.items() if k not in ("name", "index")}
+                         for case in found.undetermined_],
+        "alike": [{**a, "manoeuvre": separating_manoeuvre(a["chosen"], a["alike"])} for a in selection.alike],
         "details": details,
     }
     return _clean(report)
+
+
+def _logs(found) -> list[dict[str, Any]]:
+    out = []
+    for log in found.logs_:
+        record = {"file": log.source, "samples": log.n_samples, "duration_s": round(log.duration, 3),
+                  "rate_hz": round(log.rate_hz, 2)}
+        if log.vehicle.thrust_map is not None:
+            record["nominal_thrust_map"] = log.vehicle.thrust_map.to_dict()
+        out.append(record)
+    return out
 
 
 def write_report(report: dict[str, Any], path: str | Path) -> Path:
@@ -107,7 +142,7 @@ def _reduction(before: float | None, after: float | None) -> str:
 
 def format_summary(report: dict[str, Any]) -> str:
     """A few lines for the terminal."""
-    lines = []
+    lines = [f"WARNING {note}" for note in report.get("notes") or [] if note.startswith("likely sidecar error")]
     if report["effects"]:
         for e in report["effects"]:
             params = ", ".join(
@@ -120,16 +155,46 @@ def format_summary(report: dict[str, Any]) -> str:
             lines.append(f"found {e['name']}: {params}; acts {place or 'nowhere'}; explains "
                          f"{100 * e['explained_fraction']:.0f} % of the held-out residual")
     else:
-        lines.append("found nothing: the logs agree with the nominal model within noise")
+        if "selection" not in report["details"]:
+            lines.append("found nothing: the logs hold no airborne flight to fit (see the notes below)")
+        elif report.get("unexplained"):
+            lines.append("found no effect of the library that explains the residual (see UNEXPLAINED below)")
+        else:
+            lines.append("found nothing: the logs agree with the nominal model within noise")
     b, a = report["gap_before"], report["gap_after"]
-    lines.append(f"held-out force residual RMS: {b['force_rms_N']:.4f} N -> {a['force_rms_N']:.4f} N "
-                 f"({_reduction(b['force_rms_N'], a['force_rms_N'])} smaller)")
-    lines.append(f"held-out open-loop prediction RMS: {b['prediction_rms_m']:.4f} m -> {a['prediction_rms_m']:.4f} m "
-                 f"({_reduction(b['prediction_rms_m'], a['prediction_rms_m'])} smaller)")
+    if b.get("force_rms_N") is not None:
+        lines.append(f"held-out force residual RMS: {_number(b['force_rms_N'])} N -> {_number(a['force_rms_N'])} N "
+                     f"({_reduction(b['force_rms_N'], a['force_rms_N'])} smaller)")
+        if b.get("prediction_rms_m") is None:
+            lines.append("held-out open-loop prediction RMS: n/a (no prediction window fits inside one "
+                         "cross-validation block; a longer log or a shorter --horizon gives one)")
+        else:
+            lines.append(f"held-out open-loop prediction RMS: {_number(b['prediction_rms_m'])} m -> "
+                         f"{_number(a['prediction_rms_m'])} m "
+                         f"({_reduction(b['prediction_rms_m'], a['prediction_rms_m'])} smaller)")
+    for case in report.get("undetermined") or []:
+        lines.append(f"undetermined {case['effect']}.{case['parameter']} = {_fmt(case['value'])} +- "
+                     f"{_fmt(case['std'])}: {case['reason']}; {case['action']}; to determine: {case['manoeuvre']}")
+    for pair in report.get("alike") or []:
+        lines.append(f"cannot tell {pair['chosen']} from {pair['alike']} in this flight (scores within one "
+                     f"parameter's price); to tell them apart: {pair['manoeuvre']}")
+    for note in report.get("notes") or []:
+        if not note.startswith("likely sidecar error"):
+            lines.append(f"note: {note}")
+    for limit in report.get("limits") or []:
+        lines.append(f"cannot determine {' / '.join(limit['effects'])}: {limit['reason']}; to determine: "
+                     f"{limit['manoeuvre']}")
     if report.get("unexplained"):
         w = report["unexplained"]["where"]
         lines.append(f"UNEXPLAINED residual ({report['unexplained']['force_rms_N']:.4f} N RMS) depends on "
-                     f"{w.get('regressor')} in {w.get('range')} {w.get('unit') or ''}")
+                     f"{w.get('regressor')} in {w.get('range')} {w.get('unit') or ''}"
+                     + (" (beyond the surface: likely a sidecar error, see the warning)"
+                        if w.get("unit") == "m" and w.get("range") and w["range"][1] <= 0 else ""))
+        shape = report["unexplained"].get("shape")
+        if shape:
+            points = ", ".join(f"{f:.3g} N at {k:.3g}" for k, f in zip(shape["knots"], shape["force_N_at_knots"]))
+            lines.append(f"  its shape along {shape['direction_world']} (piecewise linear in {shape['regressor']}, "
+                         f"{shape['unit']}): {points}")
     cl = report.get("closed_loop")
     if cl:
         lines.append(cl.get("summary", ""))
@@ -138,7 +203,11 @@ def format_summary(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _number(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.4f}"
+
+
 def _fmt(value: Any) -> str:
     if isinstance(value, list):
-        return "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
-    return f"{value:.4g}"
+        return "[" + ", ".join(_fmt(v) for v in value) + "]"
+    return "n/a" if value is None else f"{value:.4g}"

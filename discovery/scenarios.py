@@ -176,9 +176,9 @@ SCENARIOS: dict[str, Scenario] = {
                  "enough (Kp 30 1/s^2 toward the wall) to fly inside the suction zone",
                  "WallInspector/WallSweep-v0", {"standoff": 0.26},
                  policy_kwargs={"kp": [30.0, 30.0, 10.0], "kv": [11.0, 11.0, 6.0]}),
-        Scenario("wall-survey", "a slow survey facing the wall, the near rotors 0.08 to 0.18 m from it, with a "
-                 "PID stiff enough (Kp 30 1/s^2) to fly inside the suction zone", "WallInspector/WallHover-v0",
-                 {"standoff": 0.25, "altitude": 1.0, "max_tracking_error": 100.0},
+        Scenario("wall-survey", "a slow 30 s survey facing the wall, the near rotors 0.08 to 0.18 m from it, "
+                 "with a PID stiff enough (Kp 30 1/s^2) to fly inside the suction zone", "WallInspector/WallHover-v0",
+                 {"standoff": 0.25, "altitude": 1.0, "max_tracking_error": 100.0, "duration": 30.0},
                  survey={"amplitude": (0.05, 0.6, 0.3), "period": (6.0, 9.0, 5.0), "centre": (0.13 + _ARM, 0.0, 1.0)},
                  policy_kwargs={"kp": [30.0, 30.0, 10.0], "kv": [11.0, 11.0, 6.0]}),
         Scenario("floor-to-ceiling", "the sweep from 0.15 m above the ground to 0.17 m under a ceiling, "

@@ -3,25 +3,39 @@
 Every candidate is judged by its cross-validated residual: the log is cut into time
 blocks dealt round robin to folds, each fold is predicted by parameters fitted on the
 others (:meth:`discovery.fitting.EffectFit.cross_validate`), and the held-out mean
-squared force residual per world axis ``MSE_a`` is what a model scores. The score is a
-Gaussian log-likelihood with its own variance per axis (the noise is far from equal:
-thrust noise lives along body z) plus a price per parameter::
+squared force residual (the vector norm, summed over the world axes) is what a model
+scores. The score is the Gaussian log-likelihood of the force-gap vector plus a price
+per parameter::
 
-    score(M) = sum_a N_a ln(MSE_a(M)) + c p(M),      c = max(chi2_1(1 - alpha), ln N)
+    score(M) = 3 N ln(MSE(M)) + c p(M),      MSE = sum_a MSE_a,   c = max(chi2_1(1 - alpha), ln 3N)
 
-where ``p(M)`` counts parameters, ``N_a`` is the number of independent residual values
-on axis ``a`` (samples divided by the smoothing kernel's correlation length
-``1 / sum(w^2)``), ``N = sum_a N_a``, and ``alpha = 1e-4``: a parameter has to raise the
-held-out likelihood as much as a 3.9-sigma detection would (``c = 15.1``), or by the
-BIC's ``ln N`` on very long logs. This matters: the mean of the simulator's thrust
-noise over a 30 s flight is itself a constant force of a few millinewtons that
-cross-validation confirms; only a price calibrated to the noise keeps it from being
-named.
+so every axis counts by its physical share of the force gap: a tiny gain on the
+quietest axis cannot outweigh halving the error on another (a score summing each
+axis' own log-error would let it). ``p(M)`` counts parameters, ``N`` is the number of
+independent residual values per axis (samples divided by the smoothing kernel's
+correlation length ``1 / sum(w^2)``), and ``alpha = 1e-4``: a parameter has to raise
+the held-out likelihood as much as a 3.9-sigma detection would (``c = 15.1``), or by
+the BIC's ``ln 3N`` on very long logs.
 
 Forward selection adds, one at a time, the candidate that lowers the score most (all
 parameters of the model refitted jointly, so two effects present together are both
-found), and stops when no candidate lowers it. A backward pass then drops any effect
-whose removal does not raise the score, so nothing stays that does not pay for itself.
+found) and that explains a material share (:data:`MIN_SHARE`, 2 %) of the held-out
+force-gap energy the model leaves without it, and stops when none does. A backward pass then drops any
+effect whose removal does not raise the score or that no longer explains a material
+share next to the others, so nothing stays that does not pay for itself.
+
+The literature's fuller forms (:data:`VARIANTS`: wall suction scaled by rotor thrust,
+ground and ceiling effects with the distance offset) are candidates of their own
+(keys such as ``ground_effect[distance_offset]``), judged by the same score, at most
+one form per effect, tried in a round only where the plain form improves the model,
+and kept only when their extra parameters are determined. Quadratic
+drag on the air-relative velocity with a fitted steady wind (``quadratic_drag[wind]``)
+looks like a steady force plus drag, so it is tried after the selection in place of
+any chosen subset of :data:`WIND_REPLACES`, and kept where it scores better.
+
+Candidates the flight cannot tell apart are recorded (:attr:`Selection.alike`): a
+runner-up of the chosen step whose score is within one parameter price of the
+winner's and that explains a material share on its own.
 """
 
 from __future__ import annotations
@@ -35,12 +49,21 @@ from scipy.stats import chi2
 
 from discovery.fitting import EffectFit, FitResult, applicable
 from discovery.residuals import FlightData
-from wall_env.effects import Effect
+from wall_env.effects import Effect, make_effect
 
-__all__ = ["ALPHA", "Candidate", "Step", "Selection", "effective_samples", "parameter_price", "score",
+__all__ = ["ALPHA", "MIN_SHARE", "VARIANTS", "Candidate", "Step", "Selection", "effective_samples", "parameter_price", "score",
            "forward_selection", "fit_only"]
 
 ALPHA = 1e-4  # significance a parameter must reach on held-out data
+MIN_SHARE = 0.02  # share of the held-out force-gap energy left without it that an effect must explain
+VARIANTS: dict[str, list[dict]] = {
+    "wall_suction": [{"thrust_scaling": True}],
+    "ground_effect": [{"distance_offset": True}],
+    "ceiling_effect": [{"distance_offset": True}],
+}
+#: drag in a steady wind looks like a steady force plus drag, so it is tried after selection,
+#: in place of whatever of these the selection chose
+WIND_REPLACES = ("constant_force", "linear_drag", "quadratic_drag")
 
 
 def effective_samples(data: FlightData) -> float:
@@ -53,14 +76,14 @@ def effective_samples(data: FlightData) -> float:
 
 
 def parameter_price(n_eff_per_axis: float, alpha: float = ALPHA) -> float:
-    """``max(chi2_1 quantile at 1 - alpha, ln N)``: what each parameter must buy in ``2 x`` log-likelihood."""
+    """``max(chi2_1 quantile at 1 - alpha, ln 3N)``: what each parameter must buy in ``2 x`` log-likelihood."""
     return max(float(chi2.ppf(1.0 - alpha, 1)), math.log(3.0 * n_eff_per_axis))
 
 
 def score(mse_axes: np.ndarray, n_params: int, n_eff_per_axis: float, alpha: float = ALPHA) -> float:
-    """``sum_a N_a ln(MSE_a) + c p``: lower is better."""
-    mse_axes = np.maximum(np.asarray(mse_axes, dtype=float), 1e-300)
-    return float(n_eff_per_axis * np.sum(np.log(mse_axes))) + parameter_price(n_eff_per_axis, alpha) * n_params
+    """``3 N ln(sum_a MSE_a) + c p``: lower is better."""
+    total = max(float(np.sum(np.asarray(mse_axes, dtype=float))), 1e-300)
+    return 3.0 * n_eff_per_axis * math.log(total) + parameter_price(n_eff_per_axis, alpha) * n_params
 
 
 @dataclass
@@ -99,6 +122,8 @@ class Selection:
     removed: list[str] = field(default_factory=list)
     explained: dict[str, float] = field(default_factory=dict)  # name -> share of the nominal held-out energy
     n_eff: float = 1.0  # independent residual values per axis
+    alike: list[dict] = field(default_factory=list)  # candidates the flight could not tell apart
+    forms: list[dict] = field(default_factory=list)  # the form (candidate key) of each chosen effect
 
 
 def _mse_axes(parts: list[np.ndarray]) -> np.ndarray:
@@ -117,10 +142,12 @@ class _Evaluator:
         self.cache: dict[tuple[str, ...], Candidate] = {}
 
     def evaluate(self, names: list[str], previous: dict[str, np.ndarray] | None = None) -> Candidate:
+        """Fit the candidate keys ``names``; ``previous`` holds starting values by key."""
         key = tuple(names)
         if key not in self.cache:
             problem = EffectFit(self.data, [self.templates[n] for n in names], self.r_nom, self.terms)
-            fit = problem.fit(previous=previous)
+            start = {self.templates[n].name: previous[n] for n in names if previous and n in previous}
+            fit = problem.fit(previous=start)
             cv, _ = problem.cross_validate(fit)
             axes = _mse_axes(cv)
             self.cache[key] = Candidate(list(names), fit, cv, float(axes.sum()), axes,
@@ -129,54 +156,157 @@ class _Evaluator:
 
 
 def _params_by_name(candidate: Candidate) -> dict[str, np.ndarray]:
-    return {e.name: e.param_vector() for e in candidate.fit.effects}
+    """Fitted parameter vectors by candidate key."""
+    return {key: e.param_vector() for key, e in zip(candidate.names, candidate.fit.effects)}
+
+
+def variant_key(name: str, options: dict) -> str:
+    """The candidate key of a fuller form, e.g. ``quadratic_drag[wind]``."""
+    return f"{name}[{','.join(sorted(k for k, v in options.items() if v))}]"
+
+
+def effect_name(key: str) -> str:
+    return key.split("[", 1)[0]
+
+
+def _with_variants(templates: dict[str, Effect], variants: dict[str, list[dict]]) -> dict[str, Effect]:
+    out = dict(templates)
+    for name, template in templates.items():
+        for options in variants.get(name, []):
+            if all(template.option_values.get(k) == v for k, v in options.items()):
+                continue
+            out[variant_key(name, options)] = make_effect(name, **{**template.option_values, **options})
+    return out
 
 
 def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: list[Effect], max_effects: int = 3,
-                      progress=None) -> Selection:
-    """Greedy forward selection (then a backward check) over ``candidates``; see the module docstring."""
-    templates = {e.name: e for e in candidates if applicable(e, data)}
+                      progress=None, variants: dict[str, list[dict]] | None = None) -> Selection:
+    """Greedy forward selection over the candidates and their fuller forms, then a backward check."""
+    base = {e.name: e for e in candidates if applicable(e, data)}
+    templates = _with_variants(base, VARIANTS if variants is None else variants)
     n_eff = effective_samples(data)
+    price = parameter_price(n_eff)
     evaluator = _Evaluator(data, r_nom, templates, n_eff)
     nominal = evaluator.evaluate([])
     current = nominal
     steps: list[Step] = []
+    alike: list[dict] = []
+
+    def material(better: Candidate, worse: Candidate) -> bool:
+        """``better`` explains at least MIN_SHARE of the force-gap energy that ``worse`` leaves."""
+        return worse.mse > 0 and (worse.mse - better.mse) / worse.mse >= MIN_SHARE
+
     while len(current.names) < max_effects:
-        remaining = [n for n in templates if n not in current.names]
+        taken = {effect_name(k) for k in current.names}
+        remaining = [k for k in templates if effect_name(k) not in taken]
         if not remaining:
             break
         tried: list[dict[str, Any]] = []
-        best = None
-        for name in remaining:
+        scored: list[Candidate] = []
+        helpful = set()  # plain forms that improve on the current model this round
+        for key in remaining:
+            if "[" in key and effect_name(key) not in helpful:
+                continue  # a fuller form is worth fitting only where its plain form already helps
             if progress is not None:
-                progress(f"trying {' + '.join(current.names + [name])}")
-            cand = evaluator.evaluate(current.names + [name], previous=_params_by_name(current))
+                progress(f"trying {' + '.join(current.names + [key])}")
+            cand = evaluator.evaluate(current.names + [key], previous=_params_by_name(current))
             gain = 1.0 - cand.mse / current.mse if current.mse > 0 else 0.0
-            tried.append({"name": name, "cv_mse_N2": cand.mse, "gain": gain, "score": cand.score,
-                          "params": cand.fit.effects[-1].params_dict()})
-            if best is None or cand.score < best.score:
-                best = cand
+            usable = cand.score < current.score and material(cand, current) and _extra_determined(cand, key)
+            tried.append({"name": key, "cv_mse_N2": cand.mse, "gain": gain, "score": cand.score,
+                          "material": material(cand, current), "params": cand.fit.effects[-1].params_dict()})
+            if cand.score < current.score:
+                helpful.add(effect_name(key))
+            if usable:
+                scored.append(cand)
         tried.sort(key=lambda r: r["score"])
-        if best is None or best.score >= current.score:
+        if not scored:
             steps.append(Step(tried, None, current.mse, current.mse))
             break
+        scored.sort(key=lambda c: c.score)
+        best = scored[0]
+        for other in scored[1:]:
+            if other.score - best.score < price and effect_name(other.names[-1]) != effect_name(best.names[-1]):
+                alike.append({"chosen": effect_name(best.names[-1]), "alike": effect_name(other.names[-1]),
+                              "score_difference": round(other.score - best.score, 2),
+                              "explained_chosen": round((current.mse - best.mse) / nominal.mse, 4),
+                              "explained_alike": round((current.mse - other.mse) / nominal.mse, 4)})
         steps.append(Step(tried, best.names[-1], current.mse, best.mse))
         current = best
-    # backward check: drop what does not pay for itself next to the others
+    current, removed = _backward(evaluator, current, material)
+    if "quadratic_drag" in base and variants is None:
+        current, evaluator = _drag_in_wind(data, r_nom, evaluator, current, base["quadratic_drag"], progress)
+    explained = _sequential_explained(evaluator, current, nominal)
+    explained = {effect_name(k): v for k, v in explained.items()}
+    chosen_names = {effect_name(k) for k in current.names}
+    alike = [a for a in alike if a["chosen"] in chosen_names]
+    forms = [{"effect": effect_name(k), "form": k} for k in current.names]
+    return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms)
+
+
+def _drag_in_wind(data: FlightData, r_nom: list[np.ndarray], evaluator: _Evaluator, current: Candidate,
+                  template: Effect, progress) -> tuple[Candidate, _Evaluator]:
+    """Quadratic drag on the air-relative velocity with a fitted wind, in place of any chosen subset of
+    :data:`WIND_REPLACES`, where it scores better and its wind is determined."""
+    replaceable = [k for k in current.names if k in WIND_REPLACES]
+    if not replaceable:
+        return current, evaluator
+    key = variant_key("quadratic_drag", {"wind": True})
+    templates = {**evaluator.templates, key: make_effect("quadratic_drag", **{**template.option_values, "wind": True})}
+    trial = _Evaluator(data, r_nom, templates, evaluator.n_eff)
+    trial.terms = evaluator.terms  # the plain effects' terms are shared; the wind form gets its own
+    best = current
+    for size in range(1, len(replaceable) + 1):
+        for dropped in _subsets(replaceable, size):
+            if "quadratic_drag" in current.names and "quadratic_drag" not in dropped:
+                continue  # one form of an effect at a time
+            names = [k for k in current.names if k not in dropped] + [key]
+            if progress is not None:
+                progress(f"trying {' + '.join(names)}")
+            previous = {k: v for k, v in _params_by_name(current).items() if k in names}
+            if "quadratic_drag" in dropped:
+                previous[key] = np.concatenate([_params_by_name(current)["quadratic_drag"], np.zeros(3)])
+            cand = trial.evaluate(names, previous=previous)
+            if cand.score < best.score and _extra_determined(cand, key):
+                best = cand
+    return (best, trial) if best is not current else (current, evaluator)
+
+
+def _subsets(items: list[str], size: int) -> list[tuple[str, ...]]:
+    from itertools import combinations
+
+    return list(combinations(items, size))
+
+
+def _extra_determined(candidate: Candidate, key: str) -> bool:
+    """A fuller form counts only if some entry of its extra parameters is determined (else the plain form
+    says as much); undetermined entries (a wind's vertical component, say) are nulled later."""
+    if "[" not in key:
+        return True
+    from discovery.determination import undetermined_cases
+
+    index = candidate.names.index(key)
+    effect = candidate.fit.effects[index]
+    std = candidate.fit.std_dicts()[index]
+    extra = [p for p in effect.parameters if p not in type(effect).parameters]
+    cases = undetermined_cases([effect], [std])
+    return sum(1 for c in cases if c["name"] in {p.name for p in extra}) < sum(p.size for p in extra)
+
+
+def _backward(evaluator: _Evaluator, current: Candidate, material) -> tuple[Candidate, list[str]]:
+    """Drop what does not pay for itself next to the others, or no longer explains a material share."""
     removed = []
     changed = True
-    while changed and len(current.names) > 1:
+    while changed and current.names:
         changed = False
         for name in list(current.names):
             reduced_names = [n for n in current.names if n != name]
             reduced = evaluator.evaluate(reduced_names, previous=_params_by_name(current))
-            if reduced.score <= current.score:
+            if reduced.score <= current.score or not material(current, reduced):
                 current = reduced
                 removed.append(name)
                 changed = True
                 break
-    explained = _sequential_explained(evaluator, current, nominal)
-    return Selection(current, nominal, steps, removed, explained, n_eff)
+    return current, removed
 
 
 def _sequential_explained(evaluator: _Evaluator, chosen: Candidate, nominal: Candidate) -> dict[str, float]:

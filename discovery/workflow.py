@@ -27,20 +27,26 @@ The five steps:
 All held-out figures use the same cross-validation folds: each time block is predicted
 by parameters fitted without it. A significant residual left after the chosen
 effects (its cross-validated bin means against some regressor predict at least
-``unexplained_threshold`` of it) is reported as ``unexplained`` with where it is.
+``unexplained_threshold`` of it) is reported as ``unexplained`` with where it is and its
+shape: the residual along its mean direction, piecewise linear in the localising
+quantity (:func:`discovery.regressors.piecewise_linear`, plotted by
+:mod:`discovery.plots`).
 """
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
 import numpy as np
 
+from discovery.coverage import REST_THRUST_SHARE, flight_limits, resting_on_ground, scene_problems
+from discovery.determination import determined, restrict
 from discovery.fitting import out_of_fold_residuals
 from discovery.flight_log import FlightLog
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
-from discovery.regressors import describe_force, localise_residual, regressors
+from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, prepare
 from discovery.selection import Selection, fit_only, forward_selection
 from wall_env.aero import AeroModel
@@ -54,6 +60,22 @@ def _rms(x: np.ndarray) -> float:
     if x.size == 0:
         return float("nan")
     return float(np.sqrt(np.mean(np.sum(x.reshape(len(x), -1) ** 2, axis=1))))
+
+
+def check_positive(name: str, value: float, unit: str, *, low: float, high: float) -> float:
+    """``value`` as a float in ``[low, high]``, or a ValueError naming the parameter and the range."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number of {unit} in [{low:g}, {high:g}], got {value!r}") from None
+    if not (math.isfinite(number) and low <= number <= high):
+        raise ValueError(f"{name} must be in [{low:g}, {high:g}] {unit}, got {value!r}")
+    return number
+
+
+def minimum_duration(window_s: float, horizon_s: float) -> float:
+    """Shortest log (s) discovery can work with: four smoothing windows, and two prediction horizons."""
+    return max(4.0 * window_s, 2.0 * horizon_s)
 
 
 class Discovery:
@@ -78,6 +100,14 @@ class Discovery:
                  horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S, max_effects: int = 3,
                  unexplained_threshold: float = 0.15, options: dict[str, dict[str, Any]] | None = None,
                  progress=None):
+        check_positive("window_s", window_s, "s", low=0.02, high=10.0)
+        check_positive("horizon_s", horizon_s, "s", low=0.02, high=10.0)
+        check_positive("block_s", block_s, "s", low=0.1, high=1e4)
+        check_positive("stride_s", stride_s, "s", low=0.001, high=10.0)
+        if isinstance(n_folds, bool) or not isinstance(n_folds, (int, np.integer)) or not 2 <= n_folds <= 20:
+            raise ValueError(f"n_folds must be an integer in [2, 20], got {n_folds!r}")
+        if isinstance(max_effects, bool) or not isinstance(max_effects, (int, np.integer)) or max_effects < 0:
+            raise ValueError(f"max_effects must be a non-negative integer, got {max_effects!r}")
         names = list(EFFECTS) if candidates is None else list(candidates)
         unknown = sorted(set(names) - set(EFFECTS)) + ([effect] if effect is not None and effect not in EFFECTS else [])
         if unknown:
@@ -106,14 +136,48 @@ class Discovery:
         """Run the five steps on ``logs``; results land in the attributes ending in ``_``."""
         started = time.perf_counter()
         logs = [logs] if isinstance(logs, FlightLog) else list(logs)
-        self._say("preparing residuals")
-        data = prepare(logs, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
-        self.data_ = data
+        if not logs:
+            raise ValueError("discovery needs at least one flight log")
+        shortest = minimum_duration(self.window_s, self.horizon_s)
+        for log in logs:
+            if log.duration < shortest:
+                raise ValueError(
+                    f"{log.source}: the log lasts {log.duration:.3g} s ({log.n_samples} samples); discovery needs "
+                    f"at least {shortest:.3g} s (4 smoothing windows of window_s = {self.window_s:g} s and 2 "
+                    f"prediction horizons of horizon_s = {self.horizon_s:g} s): record a longer flight or lower "
+                    "window_s / horizon_s (--window, --horizon)")
         self.logs_ = logs
+        self.notes_: list[str] = []
+        airborne = []
+        for log in logs:
+            resting = resting_on_ground(log)
+            if resting.any():
+                dt = float(np.median(np.diff(log.t)))
+                self.notes_.append(
+                    f"{log.source}: {resting.sum() * dt:.1f} s of {log.duration:.1f} s held up by something "
+                    f"else: the thrust carries less than {100 * REST_THRUST_SHARE:.0f} % of the weight and the vehicle "
+                    "does not fall (on the ground or held): "
+                    "left out, that force is not aerodynamic")
+            if (~resting).sum() >= 2 and not resting.all():
+                kept = log.select(~resting)
+                if kept.duration >= shortest:
+                    airborne.append(kept)
+        self._say("preparing residuals")
+        try:
+            data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
+        except ValueError:
+            if airborne:
+                raise
+            return self._nothing_to_fit(f"no airborne stretch of at least {shortest:.3g} s: nothing to fit",
+                                        started)
+        self.usable_ = True
+        self.data_ = data
         vehicle = data.vehicle.to_vehicle_params()
         nominal = FlightModel(vehicle, [])
         r_nom = data.residuals(nominal.aero_model())
         self.regressors_ = regressors(data)
+        self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]))
+        self.notes_ += scene_problems(self.regressors_, data.times)
 
         # 1-2: residual and where it is
         self.residual_before_ = data.concat(r_nom)
@@ -126,11 +190,14 @@ class Discovery:
         else:
             templates = [self._template(n) for n in self.candidates]
             selection = forward_selection(data, r_nom, templates, self.max_effects, progress=self._say)
-        self.selection_ = selection
+        self.selection_: Selection | None = selection
         chosen = selection.chosen
-        self.effects_ = list(chosen.fit.effects)
-        self.param_std_ = chosen.fit.std_dicts()
-        self.explained_fraction_ = dict(selection.explained)
+        # only what the flight determined goes into the model (discovery.determination)
+        self.effects_, self.param_std_, self.undetermined_ = determined(list(chosen.fit.effects),
+                                                                        chosen.fit.std_dicts())
+        kept_names = {e.name for e in self.effects_}
+        self.explained_fraction_ = {k: v for k, v in selection.explained.items() if k in kept_names}
+        fold_theta = [self._restricted_theta(chosen.fit.effects, theta_k) for theta_k in chosen.fit.fold_theta]
 
         # 4: the fix
         self.model_ = FlightModel(vehicle, list(self.effects_),
@@ -138,10 +205,9 @@ class Discovery:
 
         # 5: the proof, on held-out data
         self._say("open-loop predictions")
-        self.residual_after_ = data.concat(out_of_fold_residuals(data, chosen.fit.effects, chosen.fit.fold_theta,
-                                                                 r_nom))
+        self.residual_after_ = data.concat(out_of_fold_residuals(data, self.effects_, fold_theta, r_nom))
         self.prediction_before_ = prediction_pairs(data, nominal.aero_model(), None, self.horizon_s, self.stride_s)
-        fold_models = self._fold_theta(selection)
+        fold_models = self._fold_theta(fold_theta)
         self.prediction_after_ = prediction_pairs(data, self.model_.aero_model(), fold_models, self.horizon_s,
                                                   self.stride_s)
         self.prediction_errors_before_ = np.linalg.norm(self.prediction_before_[1] - self.prediction_before_[2], axis=1)
@@ -163,21 +229,64 @@ class Discovery:
         self.unexplained_ = None
         if left["regressor"] is not None and left["explained_fraction"] >= self.unexplained_threshold \
                 and left.get("range") is not None:
-            self.unexplained_ = {"force_rms_N": _rms(self.residual_after_), "where": _public_where(left)}
+            self.unexplained_ = {"force_rms_N": _rms(self.residual_after_), "where": _public_where(left),
+                                 "shape": self._shape(left)}
         self.runtime_s_ = time.perf_counter() - started
         return self
 
-    def _fold_theta(self, selection: Selection) -> list[np.ndarray] | None:
+    def _shape(self, where: dict) -> dict | None:
+        """The unexplained residual along its mean direction, piecewise linear in its localising quantity."""
+        reg = next((r for r in self.regressors_ if r.name == where.get("regressor")), None)
+        direction = where.get("direction_world")
+        if reg is None or direction is None:
+            return None
+        along = self.residual_after_ @ np.asarray(direction, dtype=float)
+        shape = piecewise_linear(reg.values, along)
+        if shape is None:
+            return None
+        return {"regressor": reg.name, "unit": reg.unit, "direction_world": direction,
+                "force_N_at_knots": shape["values"], "knots": shape["knots"],
+                "explained_fraction": shape["explained_fraction"]}
+
+    def _nothing_to_fit(self, reason: str, started: float) -> Discovery:
+        """Results of a run whose logs hold nothing to fit: no effects, the nominal model, and why."""
+        self.usable_ = False
+        self.notes_.append(reason)
+        vehicle = self.logs_[0].vehicle.to_vehicle_params()
+        self.effects_, self.param_std_, self.explained_fraction_, self.undetermined_ = [], [], {}, []
+        self.model_ = FlightModel(vehicle, [])
+        self.selection_ = None
+        self.limits_ = [{"effects": sorted(EFFECTS), "reason": reason,
+                         "manoeuvre": "fly: take off and hover, move along each body axis at 1 m/s or more, and "
+                                      "pass close to the walls, ground and ceiling of the scene"}]
+        self.where_, self.where_before_, self.where_after_, self.effect_forces_ = {}, {}, {}, {}
+        self.unexplained_ = None
+        nan = float("nan")
+        self.gap_before_ = {"force_rms_N": nan, "prediction_rms_m": nan}
+        self.gap_after_ = dict(self.gap_before_)
+        self.prediction_errors_before_ = np.zeros(0)
+        self.runtime_s_ = time.perf_counter() - started
+        return self
+
+    def _restricted_theta(self, effects: list[Effect], theta: np.ndarray) -> np.ndarray:
+        """One fold's parameters of ``effects`` with the same undetermined entries nulled or left out."""
+        fold_effects, index = [], 0
+        for effect in effects:
+            fold_effects.append(effect.with_params(theta[index:index + effect.param_size]))
+            index += effect.param_size
+        kept = restrict(fold_effects, self.undetermined_)
+        return np.concatenate([e.param_vector() for e in kept]) if kept else np.zeros(0)
+
+    def _fold_theta(self, fold_theta: list[np.ndarray]) -> list[np.ndarray] | None:
         """Per-fold parameters of the full model (nominal drag plus effects) for predictions."""
-        fit = selection.chosen.fit
-        if not fit.fold_theta:
+        if not fold_theta:
             return None
         full = self.model_.aero_model()
         out = []
-        for theta_k in fit.fold_theta:
+        for theta_k in fold_theta:
             effects = []
             index = 0
-            for effect in fit.effects:
+            for effect in self.effects_:
                 effects.append(effect.with_params(theta_k[index:index + effect.param_size]))
                 index += effect.param_size
             fold_model = FlightModel(self.model_.vehicle, effects).aero_model()

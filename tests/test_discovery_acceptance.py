@@ -198,6 +198,11 @@ def test_a_residual_no_candidate_explains_is_reported_as_unexplained_with_where_
     assert where["range"][0] < 0.1 and where["range"][1] < 0.25
     assert where["direction_world"][2] > 0.95  # the ground pushes up
     assert report["unexplained"]["force_rms_N"] > 0.1
+    # its shape, free of any effect's form: strong near the ground, fading with height
+    shape = report["unexplained"]["shape"]
+    assert shape["regressor"] == "height above ground" and shape["explained_fraction"] > 0.5
+    assert shape["knots"] == sorted(shape["knots"])
+    assert shape["force_N_at_knots"][0] > 3 * abs(shape["force_N_at_knots"][-1])
 
 
 def test_a_log_with_a_dropout_is_processed_in_two_segments(paper_log, tmp_path):
@@ -210,3 +215,31 @@ def test_a_log_with_a_dropout_is_processed_in_two_segments(paper_log, tmp_path):
     found = Discovery().fit(log)
     assert found.names_ == ["wall_suction"]
     assert max(relative_errors(found.effects_[0].params_dict(), {"k_s": 4.1, "d_thr": 0.132})) < 0.05
+
+
+# ---------------------------------------------------------------------- the literature's forms, nothing spurious
+def test_quadratic_drag_in_a_steady_wind_is_named_with_its_wind(tmp_path):
+    path = tmp_path / "windy.csv"
+    truth = {"C": [0.08, 0.1, 0.12], "w": [1.5, -1.0, 0.0]}
+    fly(None, "pid", "quadratic_drag:C=0.08/0.1/0.12,w=1.5/-1/0", 71, path, scenario="survey", duration=DURATION_S)
+    found = Discovery().fit(read_log(path))
+    assert found.names_ == ["quadratic_drag"]
+    drag = found.effects_[0]
+    assert drag.option_values == {"wind": True}
+    assert drag.values["C"] == pytest.approx(truth["C"], rel=0.1)
+    assert np.linalg.norm(drag.values["w"] - truth["w"]) < 0.1 * np.linalg.norm(truth["w"])
+    assert found.gap_after_["force_rms_N"] < 0.2 * found.gap_before_["force_rms_N"]
+
+
+def test_suction_with_a_steady_side_wind_gets_no_spurious_thrust_scale_and_no_vertical_force(tmp_path):
+    path = tmp_path / "suction_wind.csv"
+    fly(None, "pid", "wall_suction:k_s=5,d_thr=0.13;constant_force:F=0.05/0.35/0", 72, path, scenario="wall-survey",
+        duration=DURATION_S)
+    found = Discovery().fit(read_log(path))
+    assert sorted(found.names_) == ["constant_force", "wall_suction"]
+    force = next(e for e in found.effects_ if e.name == "constant_force").values["F"]
+    assert force[1] == pytest.approx(0.35, rel=0.1)
+    assert abs(force[2]) < 0.03  # the true wind has no vertical part
+    report = found.report()
+    # at the survey's nearly constant thrust a thrust scale would look like a vertical force: the report says so
+    assert any(limit["effects"] == ["thrust_scale", "constant_force"] for limit in report["limits"])

@@ -213,7 +213,7 @@ def test_partial_optional_group_is_named(good_log):
 def test_unknown_json_key_is_named_with_its_line(good_log):
     _edit_json(good_log, lambda d: d["vehicle"].update({"inertia": [1, 2, 3]}))
     _expect(good_log, r"flight\.json: key 'vehicle\.inertia', line \d+: unknown key; allowed in vehicle: "
-                      r"\['drag', 'mass', 'rotor_positions'\]")
+                      r"\['drag', 'mass', 'rotor_positions', 'thrust_map'\]")
 
 
 @pytest.mark.parametrize("key, value, pattern", [

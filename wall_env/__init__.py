@@ -6,12 +6,21 @@
     import wall_env
 
     env = gym.make("WallInspector/WallSweep-v0", k_s=4.1, d_thr=0.132)
+    envs = gym.make_vec("WallInspector/WallSweep-v0", num_envs=1024, vectorization_mode="vector_entry_point")
+
+Each id is registered with a ``vector_entry_point``
+(:class:`~wall_env.vector_env.WallInspectorVectorEnv`) and ``max_episode_steps`` =
+:data:`~wall_env.config.MAX_EPISODE_STEPS`, the longest episode any settings allow. The
+env itself ends each episode at its reference's end (``duration``, a keyword), so a
+registered limit of the default length would cut short every flight given a longer
+``duration``; stepping on after the end raises a ``RuntimeError`` that says to reset.
 """
 
 from gymnasium.envs.registration import register, registry
 
 from wall_env.actions import ActionMapping
 from wall_env.aero import AeroModel
+from wall_env.config import MAX_EPISODE_STEPS, EnvConfig
 from wall_env.effects import EFFECTS, Effect, effects_from_spec, make_effect
 from wall_env.env import DEFAULT_REWARD_WEIGHTS, WallInspectorEnv
 from wall_env.model_file import FlightModel, nominal_aero_model
@@ -24,6 +33,8 @@ from wall_env.vehicle import GRAVITY, VehicleParams
 __all__ = [
     "ENV_IDS",
     "WallInspectorEnv",
+    "WallInspectorVectorEnv",
+    "EnvConfig",
     "VehicleParams",
     "Scene",
     "Wall",
@@ -48,4 +59,14 @@ ENV_IDS = tuple(f"WallInspector/{name}-v0" for name in TASKS)
 for _name in TASKS:
     _id = f"WallInspector/{_name}-v0"
     if _id not in registry:
-        register(id=_id, entry_point="wall_env.env:WallInspectorEnv", kwargs={"task": _name})
+        register(id=_id, entry_point="wall_env.env:WallInspectorEnv",
+                 vector_entry_point="wall_env.vector_env:WallInspectorVectorEnv", kwargs={"task": _name},
+                 max_episode_steps=MAX_EPISODE_STEPS)
+
+
+def __getattr__(name: str):
+    if name == "WallInspectorVectorEnv":  # imported on first use: it pulls in Gymnasium's vector module
+        from wall_env.vector_env import WallInspectorVectorEnv
+
+        return WallInspectorVectorEnv
+    raise AttributeError(f"module 'wall_env' has no attribute {name!r}")

@@ -4,6 +4,9 @@ For every task with its default settings: env steps per second in one process wi
 random actions (resets included, through ``gym.make`` and its wrappers), the median
 ``reset()`` time, and the steps per second of a 2-process vector env
 (``gymnasium.vector.AsyncVectorEnv``). ``--json`` writes the figures.
+
+``--batched`` measures the batched env instead (:mod:`wall_env.benchmark_batched`):
+its scaling curve over the number of vehicles, beside the single env in the same run.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 import wall_env
+from wall_env.validation import check_output_folder
 
 TARGET_STEPS_PER_S = 5000.0
 TARGET_RESET_MS = 1.0
@@ -28,7 +32,9 @@ def measure_single(env_id: str, steps: int, seed: int = 0) -> dict[str, float]:
     env.reset(seed=seed)
     env.action_space.seed(seed)
     for _ in range(200):  # warm-up: first calls load the compiled dynamics
-        env.step(env.action_space.sample())
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
     env.reset(seed=seed)
     reset_times = []
     start = time.perf_counter()
@@ -73,11 +79,42 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--n-envs", type=int, default=2, help="processes of the vector env (default 2)")
     parser.add_argument("--json", metavar="FILE", help="write the figures to this JSON file")
     parser.add_argument("--markdown", metavar="FILE", help="write the table as Markdown (for `wall-inspector readme`)")
+    parser.add_argument("--batched", action="store_true",
+                        help="the batched env's scaling curve (one task: --envs ID, default WallSweep-v0)")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1, 8, 64, 256, 1024, 4096],
+                        help="--batched: vehicles per batched env (default 1 8 64 256 1024 4096)")
+    parser.add_argument("--batched-steps", type=int, default=400_000,
+                        help="--batched: env steps per figure, at least 20 calls (default 400000)")
+    parser.add_argument("--two-core-n", type=int, default=1024,
+                        help="--batched: vehicles per process for the two-process figure, 0 = skip (default 1024)")
+    parser.add_argument("--memory-resets", type=int, default=1000,
+                        help="--batched: resets of a 1,024-env batch for the memory check, 0 = skip (default 1000)")
+    parser.add_argument("--plot", metavar="FILE", help="--batched: write the scaling curve as a picture (PNG)")
 
 
 def run(args: argparse.Namespace) -> int:
     if args.steps < 100:
         raise SystemExit("--steps must be at least 100")
+    unknown = [env_id for env_id in args.envs if env_id not in wall_env.ENV_IDS]
+    if unknown:
+        raise SystemExit(f"unknown environment id(s) {unknown}; known: {list(wall_env.ENV_IDS)}")
+    for flag in ("json", "markdown", "plot"):  # output paths are checked before minutes of measuring
+        value = getattr(args, flag, None)
+        if value:
+            if os.path.isdir(value):
+                raise SystemExit(f"--{flag} {value}: is a folder; give a file name")
+            try:
+                check_output_folder(os.path.dirname(os.path.abspath(value)), f"--{flag}")
+            except ValueError as exc:
+                raise SystemExit(str(exc)) from None
+    if args.plot and not args.batched:
+        raise SystemExit("--plot draws the batched env's scaling curve: use it with --batched")
+    if args.batched:
+        if any(n < 1 for n in args.sizes) or args.batched_steps < 1 or args.two_core_n < 0 or args.memory_resets < 0:
+            raise SystemExit("--sizes and --batched-steps must be positive, --two-core-n and --memory-resets >= 0")
+        from wall_env.benchmark_batched import run_batched
+
+        return run_batched(args)
     results = {}
     header = f"{'environment':32s} {'steps/s':>10s} {'reset ms':>9s} {f'{args.n_envs}-proc steps/s':>16s}"
     print(header)

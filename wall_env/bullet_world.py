@@ -1,11 +1,12 @@
-"""The PyBullet side of the simulator: scene bodies, collision queries and pictures.
+"""The PyBullet side of the simulator: scene bodies, pictures and a contact query.
 
 PyBullet holds the walls, the ground, an optional ceiling and the vehicle's collision
-geometry (four ducts as cylinders around the rotor centres plus the central body).
-Each control step the vehicle is placed at the integrated state and PyBullet reports
-its contacts with the scene; PyBullet's own integrator is not used, so that the flight
-dynamics are exactly the compiled model (see :mod:`wall_env.dynamics`). Pictures come
-from PyBullet's CPU renderer, which needs no display.
+geometry (four ducts as cylinders around the rotor centres plus the central body, the
+shapes of :func:`wall_env.contact.collision_shapes`). The envs place the vehicle at the
+integrated state for pictures (PyBullet's CPU renderer, no display needed) and the
+human viewer. Contact during flight is computed in closed form by :mod:`wall_env.contact`
+(the same code for one vehicle and for a batch); :meth:`BulletWorld.contacts` remains
+as an independent check of that geometry.
 """
 
 from __future__ import annotations
@@ -48,7 +49,8 @@ with _quiet_native_output():
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
 
-from wall_env.scene import Scene  # noqa: E402 - after the quietened PyBullet import above
+from wall_env.contact import collision_shapes  # noqa: E402 - after the quietened PyBullet import above
+from wall_env.scene import Scene  # noqa: E402
 from wall_env.vehicle import VehicleParams  # noqa: E402
 
 __all__ = ["BulletWorld", "Contact"]
@@ -131,13 +133,13 @@ class BulletWorld:
 
     def _build_vehicle(self, vehicle: VehicleParams) -> int:
         bc = self._client
-        rotors = vehicle.rotor_positions_array
+        geometry = collision_shapes(vehicle)  # the shapes the closed-form contact uses
+        rotors = geometry.duct_centres
         n = len(rotors)
-        arm_half = float(np.max(np.linalg.norm(rotors[:, :2], axis=1))) - vehicle.duct_radius
         shapes = [pybullet.GEOM_CYLINDER] * n + [pybullet.GEOM_BOX]
-        radii = [vehicle.duct_radius] * n + [0.0]
-        lengths = [vehicle.duct_height] * n + [0.0]
-        half_box = [max(arm_half, 0.02) / 2, max(arm_half, 0.02) / 2, 0.015]
+        radii = [geometry.duct_radius] * n + [0.0]
+        lengths = [geometry.duct_height] * n + [0.0]
+        half_box = [float(h) for h in geometry.box_half_extents]
         positions = [list(r) for r in rotors] + [[0.0, 0.0, 0.0]]
         collision = bc.createCollisionShapeArray(
             shapeTypes=shapes, radii=radii, lengths=lengths, halfExtents=[[0, 0, 0]] * n + [half_box],

@@ -27,7 +27,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["CompiledFunction", "cache_dir"]
+__all__ = ["CompiledFunction", "BatchedFunction", "cache_dir"]
 
 _LIBRARIES: dict[str, ctypes.CDLL | None] = {}
 _LOCK = threading.Lock()
@@ -52,7 +52,7 @@ def _generate_source(function: ca.Function) -> str:
         return Path(tmp, f"{function.name()}.c").read_text()
 
 
-def _compile(source: str, target: Path) -> None:
+def _compile(source: str, target: Path, flags: tuple[str, ...] = ("-O2",)) -> None:
     compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if compiler is None:
         raise RuntimeError("no C compiler found (set CC or install gcc)")
@@ -60,14 +60,15 @@ def _compile(source: str, target: Path) -> None:
         src = Path(tmp, "source.c")
         src.write_text(source)
         out = Path(tmp, target.name)
-        cmd = [compiler, "-O2", "-shared", "-fPIC", "-o", str(out), str(src), "-lm"]
+        cmd = [compiler, *flags, "-shared", "-fPIC", "-o", str(out), str(src), "-lm"]
         subprocess.run(cmd, check=True, capture_output=True)
         os.replace(out, target)  # atomic: concurrent processes never load a half-written file
 
 
-def _load(function: ca.Function) -> ctypes.CDLL | None:
-    source = _generate_source(function)
-    key = hashlib.sha256(source.encode()).hexdigest()[:24]
+def _load(function: ca.Function, extra_source: str = "", flags: tuple[str, ...] = ("-O2",)) -> ctypes.CDLL | None:
+    source = _generate_source(function) + extra_source
+    hashed = source if flags == ("-O2",) else source + "\n/* flags: " + " ".join(flags) + " */"
+    key = hashlib.sha256(hashed.encode()).hexdigest()[:24]
     with _LOCK:
         if key in _LIBRARIES:
             return _LIBRARIES[key]
@@ -75,7 +76,7 @@ def _load(function: ca.Function) -> ctypes.CDLL | None:
         library: ctypes.CDLL | None
         try:
             if not target.exists():
-                _compile(source, target)
+                _compile(source, target, flags)
             library = ctypes.CDLL(str(target))
         except (OSError, RuntimeError, subprocess.CalledProcessError) as exc:
             warnings.warn(
@@ -89,6 +90,16 @@ def _load(function: ca.Function) -> ctypes.CDLL | None:
         return library
 
 
+def _check_dense(function: ca.Function) -> None:
+    """Compiled calls pass flat buffers, so every input and output must be dense."""
+    for i in range(function.n_in()):
+        if not function.sparsity_in(i).is_dense():
+            raise ValueError(f"input {function.name_in(i)!r} of {function.name()!r} must be dense")
+    for i in range(function.n_out()):
+        if not function.sparsity_out(i).is_dense():
+            raise ValueError(f"output {function.name_out(i)!r} of {function.name()!r} must be dense")
+
+
 class CompiledFunction:
     """A dense CasADi function evaluated as native code.
 
@@ -99,12 +110,7 @@ class CompiledFunction:
     """
 
     def __init__(self, function: ca.Function):
-        for i in range(function.n_in()):
-            if not function.sparsity_in(i).is_dense():
-                raise ValueError(f"input {function.name_in(i)!r} of {function.name()!r} must be dense")
-        for i in range(function.n_out()):
-            if not function.sparsity_out(i).is_dense():
-                raise ValueError(f"output {function.name_out(i)!r} of {function.name()!r} must be dense")
+        _check_dense(function)
         self.function = function
         self._inputs = [np.zeros(function.nnz_in(i)) for i in range(function.n_in())]
         self._outputs = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
@@ -141,3 +147,105 @@ class CompiledFunction:
         if self._entry(self._argv, self._resv, self._iw, self._w, 0) != 0:
             raise FloatingPointError(f"native evaluation of {self.name} failed")
         return tuple(out.copy() for out in self._outputs)
+
+
+# A loop over the rows of batched inputs, appended to the generated source of a function
+# ``NAME``: row k of input i starts at ``arg[i] + k * nnz_in(i)`` (the same for outputs), so
+# NumPy arrays of shape (n, nnz) in C order are passed as they are. ``arg``/``res`` hold the
+# function's own work arrays past its inputs/outputs, hence the copies of size sz_arg/sz_res.
+_BATCH_LOOP = """
+CASADI_SYMBOL_EXPORT int {name}_batch(casadi_int n, const casadi_real** arg, casadi_real** res,
+                                      casadi_int* iw, casadi_real* w) {{
+  static const casadi_int nnz_in[{n_in}] = {{{nnz_in}}};
+  static const casadi_int nnz_out[{n_out}] = {{{nnz_out}}};
+  const casadi_real* a[{sz_arg}];
+  casadi_real* r[{sz_res}];
+  casadi_int i, k;
+  for (k = 0; k < n; ++k) {{
+    for (i = 0; i < {sz_arg}; ++i) a[i] = 0;
+    for (i = 0; i < {sz_res}; ++i) r[i] = 0;
+    for (i = 0; i < {n_in}; ++i) a[i] = arg[i] + k * nnz_in[i];
+    for (i = 0; i < {n_out}; ++i) r[i] = res[i] + k * nnz_out[i];
+    if ({name}(a, r, iw, w, 0)) return (int)(k + 1);
+  }}
+  return 0;
+}}
+"""
+
+# compiler flags of batched functions: -fno-math-errno lets sqrt compile to one instruction
+# (the results are the same; only errno is no longer set)
+_BATCH_FLAGS = ("-O3", "-fno-math-errno")
+
+
+class BatchedFunction:
+    """A dense CasADi function evaluated as native code on ``n`` rows of inputs in one call.
+
+    The generated C code of ``function`` is compiled with a loop over the rows (see
+    ``_BATCH_LOOP``), so one call evaluates the same code for every vehicle of a batch;
+    ``n = 1`` is the single environment. Inputs and outputs are NumPy arrays of shape
+    ``(n, nnz)`` (each row a matrix in CasADi's column-major order).
+    """
+
+    def __init__(self, function: ca.Function):
+        _check_dense(function)
+        self.function = function
+        self.nnz_in = [function.nnz_in(i) for i in range(function.n_in())]
+        self.nnz_out = [function.nnz_out(i) for i in range(function.n_out())]
+        extra = _BATCH_LOOP.format(
+            name=function.name(), n_in=function.n_in(), n_out=function.n_out(),
+            nnz_in=", ".join(map(str, self.nnz_in)) or "0", nnz_out=", ".join(map(str, self.nnz_out)) or "0",
+            sz_arg=max(function.sz_arg(), 1), sz_res=max(function.sz_res(), 1),
+        )
+        library = _load(function, extra, _BATCH_FLAGS)
+        self.native = library is not None
+        self._iw = (ctypes.c_longlong * max(function.sz_iw(), 1))()
+        self._w = (ctypes.c_double * max(function.sz_w(), 1))()
+        if library is not None:
+            self._entry = getattr(library, f"{function.name()}_batch")
+            self._entry.restype = ctypes.c_int
+            self._entry.argtypes = [ctypes.c_longlong] + [ctypes.c_void_p] * 4
+        self._argv = (_DOUBLE_P * function.n_in())()
+        self._resv = (_DOUBLE_P * function.n_out())()
+        self._bound: tuple[int, list[np.ndarray], list[np.ndarray]] | None = None
+
+    @property
+    def name(self) -> str:
+        return self.function.name()
+
+    def outputs(self, n: int) -> list[np.ndarray]:
+        """Fresh output arrays for ``n`` rows."""
+        return [np.zeros((n, k)) for k in self.nnz_out]
+
+    def bind(self, inputs: list[np.ndarray], outputs: list[np.ndarray]) -> None:
+        """Fix the arrays that :meth:`__call__` reads and writes: ``inputs[i]`` and ``outputs[j]``
+        are C-contiguous float64 arrays of shape ``(n, nnz)``, changed in place between calls
+        (binding once saves the pointer conversions, which cost more than a vehicle's step)."""
+        n = outputs[0].shape[0]
+        for kind, arrays, sizes in (("input", inputs, self.nnz_in), ("output", outputs, self.nnz_out)):
+            if len(arrays) != len(sizes):
+                raise ValueError(f"{self.name} has {len(sizes)} {kind}s, got {len(arrays)}")
+            for i, (value, size) in enumerate(zip(arrays, sizes)):
+                if value.dtype != np.float64 or not value.flags.c_contiguous or value.shape != (n, size):
+                    raise ValueError(f"{kind} {i} of {self.name} must be C-contiguous float64 of shape "
+                                     f"{(n, size)}, got {value.dtype} {value.shape}")
+        self._bound = (n, list(inputs), list(outputs))
+        for i, value in enumerate(inputs):
+            self._argv[i] = value.ctypes.data_as(_DOUBLE_P)
+        for j, value in enumerate(outputs):
+            self._resv[j] = value.ctypes.data_as(_DOUBLE_P)
+
+    def __call__(self) -> None:
+        """Evaluate every row of the bound arrays, writing the bound outputs."""
+        if self._bound is None:
+            raise RuntimeError(f"bind the arrays of {self.name} before calling it")
+        n, inputs, outputs = self._bound
+        if self.native:
+            failed = self._entry(n, self._argv, self._resv, self._iw, self._w)
+            if failed:
+                raise FloatingPointError(f"native evaluation of {self.name} failed for row {failed - 1}")
+            return
+        for k in range(n):
+            result = self.function(*[value[k] for value in inputs])
+            result = result if isinstance(result, (list, tuple)) else [result]
+            for out, r in zip(outputs, result):
+                out[k] = np.asarray(r, dtype=float).reshape(-1, order="F")

@@ -35,13 +35,15 @@ import casadi as ca
 import numpy as np
 
 from wall_env.aero import AeroModel, symbolic_scene
-from wall_env.codegen import CompiledFunction
+from wall_env.codegen import BatchedFunction, CompiledFunction
+from wall_env.contact import collision_shapes, contact_response
 from wall_env.effects import FlightContext
 from wall_env.rotations import quat_multiply, quat_to_rotation
 from wall_env.scene import Scene
 from wall_env.vehicle import GRAVITY, VehicleParams
 
-__all__ = ["STATE_SIZE", "StateIndex", "build_step_function", "Simulator"]
+__all__ = ["STATE_SIZE", "StateIndex", "build_step_function", "build_env_step_function", "Simulator",
+           "BatchSimulator"]
 
 STATE_SIZE = 17
 
@@ -56,6 +58,15 @@ class StateIndex:
     rotor_thrusts = slice(13, 17)
 
 
+def _commanded_rotor_thrusts(vehicle: VehicleParams, omega: ca.SX, u: ca.SX) -> ca.SX:
+    """Rate loop and mixer: rotor thrusts for command ``u`` at body rates ``omega``, clipped to the rotor limits."""
+    J = ca.DM(vehicle.inertia)
+    gyro = ca.cross(omega, J * omega)
+    tau_des = J * ca.DM(vehicle.rate_gains) * (u[1:4] - omega) + gyro
+    f_des = ca.DM(vehicle.mixer_matrix) @ ca.vertcat(u[0], tau_des)
+    return ca.fmin(ca.fmax(f_des, 0.0), vehicle.rotor_thrust_max)
+
+
 def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structure: tuple) -> ca.Function:
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", 4)
@@ -68,12 +79,9 @@ def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structu
     q_unit = q / ca.norm_2(q)
     R = quat_to_rotation(q_unit)
     J = ca.DM(vehicle.inertia)
-    gains = ca.DM(vehicle.rate_gains)
     gyro = ca.cross(omega, J * omega)
 
-    tau_des = J * gains * (u[1:4] - omega) + gyro
-    f_des = ca.DM(vehicle.mixer_matrix) @ ca.vertcat(u[0], tau_des)
-    f_des = ca.fmin(ca.fmax(f_des, 0.0), vehicle.rotor_thrust_max)
+    f_des = _commanded_rotor_thrusts(vehicle, omega, u)
     if vehicle.motor_time_constant > 0:
         f_act = f
         f_dot = (f_des - f) / vehicle.motor_time_constant
@@ -96,7 +104,8 @@ def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structu
     return ca.Function("flight_dynamics", [x, u, mass, theta, scene_vector], [x_dot, forces, f_act])
 
 
-def _rk4_substep(dynamics: ca.Function, h: float, lagged: bool) -> ca.Function:
+def _rk4_substep(dynamics: ca.Function, h: float, vehicle: VehicleParams) -> ca.Function:
+    lagged = vehicle.motor_time_constant > 0
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", 4)
     args = [ca.SX.sym(dynamics.name_in(i), dynamics.sparsity_in(i)) for i in range(2, dynamics.n_in())]
@@ -107,8 +116,8 @@ def _rk4_substep(dynamics: ca.Function, h: float, lagged: bool) -> ca.Function:
     x_next = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     q = x_next[StateIndex.q_body_to_world]
     x_next[StateIndex.q_body_to_world] = q / ca.norm_2(q)
-    if not lagged:  # rotor thrusts are algebraic: report those of the new state
-        x_next[StateIndex.rotor_thrusts] = dynamics(x_next, u, *args)[2]
+    if not lagged:  # rotor thrusts are algebraic: report those of the new state (rate loop and mixer only)
+        x_next[StateIndex.rotor_thrusts] = _commanded_rotor_thrusts(vehicle, x_next[StateIndex.omega_body], u)
     return ca.Function("rk4_substep", [x, u, *args], [x_next, forces])
 
 
@@ -131,7 +140,7 @@ def build_step_function(
 
     model = AeroModel([make_effect(name, **dict(options)) for name, options in structure_key])
     dynamics = _continuous_dynamics(vehicle, model, scene_structure)
-    substep = _rk4_substep(dynamics, control_dt / substeps, vehicle.motor_time_constant > 0)
+    substep = _rk4_substep(dynamics, control_dt / substeps, vehicle)
 
     x = ca.MX.sym("x", STATE_SIZE)
     u = ca.MX.sym("u", 4)
@@ -163,6 +172,76 @@ def build_step_function(
         ["x", "u", "mass", "theta", "scene"],
         ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world"],
     )
+
+
+@lru_cache(maxsize=32)
+def build_env_step_function(
+    vehicle: VehicleParams, structure_key: tuple, scene_structure: tuple, control_dt: float, substeps: int
+) -> ca.Function:
+    """The environments' control step: :func:`build_step_function` followed by the closed-form
+    contact response (:mod:`wall_env.contact`).
+
+    ``env_step(x[17], u[4], mass, theta, scene, restitution) -> (x_next[17],
+    effect_forces_world[3 x n_effects], rotor_wall_distances[n_walls x 4], R_body_to_world[3x3],
+    penetrations[n_planes])``: the state, distances and rotation after the response; the
+    penetrations before it (one per plane: walls, ground, ceiling).
+    """
+    step = build_step_function(vehicle, structure_key, scene_structure, control_dt, substeps)
+    xs = ca.SX.sym("x", STATE_SIZE)
+    restitution = ca.SX.sym("restitution")
+    scene_symbols, scene_vector = symbolic_scene(scene_structure)
+    R = quat_to_rotation(xs[StateIndex.q_body_to_world])
+    p, v, penetrations = contact_response(xs[StateIndex.p_world], R, xs[StateIndex.v_world], scene_symbols,
+                                          collision_shapes(vehicle), restitution)
+    x_after = ca.vertcat(p, xs[StateIndex.q_body_to_world], v, xs[10:STATE_SIZE])
+    rows = [ca.horzcat(*[ca.dot(normal, p + R @ ca.DM(r) - point) for r in vehicle.rotor_positions_array])
+            for point, normal in zip(scene_symbols.wall_points, scene_symbols.wall_normals)]
+    distances = ca.vertcat(*rows) if rows else ca.SX.zeros(0, 4)
+    respond = ca.Function("contact", [xs, scene_vector, restitution], [x_after, distances, penetrations])
+
+    x = ca.MX.sym("x", STATE_SIZE)
+    u = ca.MX.sym("u", 4)
+    mass = ca.MX.sym("mass")
+    theta = ca.MX.sym("theta", step.size1_in(3))
+    scene = ca.MX.sym("scene", step.size1_in(4))
+    e = ca.MX.sym("restitution")
+    x_next, forces, _, R_next = step(x, u, mass, theta, scene)
+    x_after_contact, distances_after, depth = respond(x_next, scene, e)
+    return ca.Function(
+        "env_step",
+        [x, u, mass, theta, scene, e],
+        [x_after_contact, forces, distances_after, R_next, depth],
+        ["x", "u", "mass", "theta", "scene", "restitution"],
+        ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world", "penetrations"],
+    )
+
+
+class BatchSimulator:
+    """The environments' compiled step (:func:`build_env_step_function`) for ``n`` vehicles in one call.
+
+    The per-vehicle inputs are rows of arrays that this object owns and the caller fills
+    in place: ``x (n, 17)``, ``u (n, 4)``, ``mass (n, 1)``, ``theta (n, P)``, ``scene (n, S)``,
+    ``restitution (n, 1)``. :meth:`step` writes the outputs, also owned arrays:
+    ``x_next (n, 17)``, ``forces (n, 3 * n_effects)`` (column-major ``3 x n_effects`` per row),
+    ``distances (n, n_walls * 4)`` (column-major ``n_walls x 4``), ``R (n, 9)`` (column-major)
+    and ``penetrations (n, n_planes)``.
+    """
+
+    def __init__(self, vehicle: VehicleParams, model: AeroModel, scene_structure: tuple, control_dt: float,
+                 substeps: int, n: int):
+        key_vehicle = dataclasses.replace(vehicle, mass=1.0)
+        function = build_env_step_function(key_vehicle, model.structure_key, scene_structure, control_dt, substeps)
+        self._step = BatchedFunction(function)
+        self.n = n
+        self.x, self.u, self.mass, self.theta, self.scene, self.restitution = (
+            np.zeros((n, size)) for size in self._step.nnz_in)
+        self.x_next, self.forces, self.distances, self.R, self.penetrations = self._step.outputs(n)
+        self._step.bind([self.x, self.u, self.mass, self.theta, self.scene, self.restitution],
+                        [self.x_next, self.forces, self.distances, self.R, self.penetrations])
+
+    def step(self) -> None:
+        """Advance every vehicle one control step (inputs and outputs: the arrays above)."""
+        self._step()
 
 
 class Simulator:

@@ -48,7 +48,9 @@ class FlightModel:
         for effect in self.effects:
             if effect.name == "linear_drag":
                 total = np.asarray(self.vehicle.drag) + effect.values["D"]
-                effect = make_effect("linear_drag", D=total)
+                # with a wind, it acts on the whole airframe's drag (nominal and extra alike)
+                effect = make_effect("linear_drag", D=total, **{k: v for k, v in effect.params_dict().items()
+                                                                if k != "D"}, **effect.option_values)
             model = model.with_effect(effect)
         return model
 

@@ -1,7 +1,10 @@
-"""Rotation helpers for symbolic (CasADi) expressions.
+"""Rotation helpers for symbolic (CasADi) expressions, and two for batches of NumPy rows.
 
 Quaternions are ``[w, x, y, z]`` (scalar first, Hamilton convention) and rotate body
-vectors into the world frame. Numeric code uses :mod:`scipy.spatial.transform`.
+vectors into the world frame. Numeric code uses :mod:`scipy.spatial.transform`, except
+the envs' resets, which use :func:`euler_xyz_to_quat_rows` and :func:`quat_to_rotation_rows`
+(closed forms on ``(n, ...)`` arrays, about 50x faster than SciPy's ``Rotation`` on
+a thousand rows, checked against it in the tests).
 
 ``so3_exp`` and ``so3_log`` are smooth to every order the solvers need, also at the
 identity, where the textbook ``acos`` form of Log has an infinite derivative:
@@ -13,8 +16,33 @@ Log is valid for rotations below about 170 deg.
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
-__all__ = ["quat_to_rotation", "quat_multiply", "skew", "so3_exp", "so3_log"]
+__all__ = ["quat_to_rotation", "quat_multiply", "skew", "so3_exp", "so3_log", "euler_xyz_to_quat_rows",
+           "quat_to_rotation_rows"]
+
+
+def euler_xyz_to_quat_rows(angles: np.ndarray) -> np.ndarray:
+    """Quaternions ``(n, 4)`` [w, x, y, z] of extrinsic x-y-z rotations ``(n, 3)`` (roll, pitch, yaw;
+    SciPy's ``Rotation.from_euler("xyz", angles)``)."""
+    half = 0.5 * np.asarray(angles, dtype=float)
+    c, s = np.cos(half), np.sin(half)
+    cx, cy, cz = c[:, 0], c[:, 1], c[:, 2]
+    sx, sy, sz = s[:, 0], s[:, 1], s[:, 2]
+    return np.stack([cz * cy * cx + sz * sy * sx,
+                     cz * cy * sx - sz * sy * cx,
+                     cz * sy * cx + sz * cy * sx,
+                     sz * cy * cx - cz * sy * sx], axis=1)
+
+
+def quat_to_rotation_rows(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(n, 3, 3)`` of unit quaternions ``(n, 4)`` [w, x, y, z]."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack([
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    ], axis=1).reshape(-1, 3, 3)
 
 
 def quat_to_rotation(q: ca.SX) -> ca.SX:

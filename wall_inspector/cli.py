@@ -32,8 +32,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("wall_inspector.train", "train a PPO agent on a wall task (checkpoints, TensorBoard, model card; --ray: many runs)"),
     "notebooks": ("wall_inspector.notebooks", "run the notebooks top to bottom (and save their outputs)"),
     "readme": ("wall_inspector.readme", "copy result tables written by other commands into README.md"),
+    "import-log": ("discovery.import_log", "convert a PX4 ULog or a ROS 2 bag into the project's flight log (CSV + JSON)"),
     "fly": ("discovery.fly", "record a flight log (CSV + JSON) from the simulator with measurement noise"),
-    "bench-discover": ("discovery.benchmark", "time model discovery on a 60 s, 100 Hz flight log"),
+    "bench-discover": ("discovery.benchmark", "time discovery on a 60 s, 100 Hz log; --acceptance: its accuracy on hidden-effect logs"),
     "discover": ("discovery.cli", "find, name and fit what the nominal model misses in flight logs; write a model file"),
 }
 

@@ -17,9 +17,10 @@ Ray Tune's own records go to ``OUT/ray/``; on a cluster of several machines ``OU
 be on storage every machine sees (a network filesystem), where Ray Tune keeps the
 checkpoints.
 
-Resource hints: each trial reserves ``--cpus-per-trial`` CPUs (default: the run's
-``n_workers``, the processes its environments step in), so Ray never starts more runs on
-a node than its CPUs carry.
+Resource hints: each trial reserves ``--cpus-per-trial`` CPUs (default
+:func:`cpus_per_run`: with ``--vector subprocess`` the run's ``n_workers``, the processes
+its environments step in; with the batched env, all in the learner's process, its
+``torch_threads``), so Ray never starts more runs on a node than its CPUs carry.
 """
 
 from __future__ import annotations
@@ -104,6 +105,16 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
     return runs
 
 
+def cpus_per_run(config: dict[str, Any]) -> int:
+    """The CPUs a training run keeps busy: its worker processes with ``vector: subprocess``, else (one batched
+    env in the learner's process) the learner's PyTorch threads."""
+    from agents.train import vector_kind
+
+    if vector_kind(config) == "subprocess":
+        return max(1, int(config["n_workers"]))
+    return max(1, int(config["torch_threads"]))
+
+
 def _report_checkpoint(run_dir: Path, folder: Path | None, metrics: dict[str, Any]) -> None:
     """Hand ``folder`` (a checkpoint of train's; ``None``: the finished run) to Ray Tune with what resuming needs."""
     from ray import tune
@@ -178,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError) as exc:
         raise SystemExit(str(exc)) from None
     out = Path(args.out).resolve()
-    cpus = float(args.cpus_per_trial if args.cpus_per_trial is not None else runs[0]["config"]["n_workers"])
+    cpus = float(args.cpus_per_trial if args.cpus_per_trial is not None else cpus_per_run(runs[0]["config"]))
     print(f"{len(runs)} training runs as Ray Tune trials, {cpus:g} CPU(s) each; collected in {out}", file=sys.stderr)
 
     from ray import tune

@@ -12,6 +12,13 @@ name               what                                    parameters
 ``constant_force`` steady world-frame force (wind, bias)   F (N, x3)
 =================  ======================================  ====================
 
+Fuller forms from the literature, switched on by an option (or by giving their
+parameter): ``ground_effect`` and ``ceiling_effect`` with ``distance_offset`` (parameter
+``offset``, m: Sanchez-Cuevas et al.'s ``k2``), ``linear_drag`` and ``quadratic_drag``
+with ``wind`` (parameter ``w``, m/s, world frame: drag on the air-relative velocity),
+``wall_suction`` with ``thrust_scaling`` (no extra parameter). Without the option
+each effect is exactly its one-line form above.
+
 Make one with :func:`make_effect` (``make_effect("wall_suction", k_s=10.0)``) or from
 a specification with :func:`effects_from_spec`.
 """

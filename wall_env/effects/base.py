@@ -116,22 +116,33 @@ class Effect(ABC):
     reference: ClassVar[str] = ""
     parameters: ClassVar[tuple[Parameter, ...]]
     options: ClassVar[dict[str, Any]] = {}
+    #: parameters that exist only when a boolean option is on (the literature's fuller forms);
+    #: giving one of them switches its option on
+    optional_parameters: ClassVar[dict[str, tuple[Parameter, ...]]] = {}
 
     def __init__(self, **kwargs: Any) -> None:
+        extra = {p.name: option for option, params in self.optional_parameters.items() for p in params}
+        self.option_values: dict[str, Any] = {}
+        for option, default in self.options.items():
+            value = kwargs.get(option, default)
+            if option in self.optional_parameters and option not in kwargs:
+                value = any(name in kwargs for name, owner in extra.items() if owner == option)
+            if type(value) is not type(default):
+                raise ValueError(f"{self.name}.{option} must be a {type(default).__name__}, got {value!r}")
+            self.option_values[option] = value
+        # the parameters of this instance: the base ones plus those of the options switched on
+        self.parameters = type(self).parameters + tuple(  # type: ignore[misc]  # per instance: options add some
+            p for option, params in self.optional_parameters.items() if self.option_values[option] for p in params)
         known_params = {p.name: p for p in self.parameters}
         unknown = sorted(set(kwargs) - set(known_params) - set(self.options))
         if unknown:
             allowed = sorted(known_params) + sorted(self.options)
-            raise ValueError(f"unknown argument(s) {unknown} for effect {self.name!r}; allowed: {allowed}")
+            off = [n for n in unknown if n in extra]
+            hint = f" ({', '.join(off)} need(s) option {sorted({extra[n] for n in off})} on)" if off else ""
+            raise ValueError(f"unknown argument(s) {unknown} for effect {self.name!r}; allowed: {allowed}{hint}")
         self.values: dict[str, np.ndarray] = {
             name: p.validate(self.name, kwargs.get(name, p.default)) for name, p in known_params.items()
         }
-        self.option_values: dict[str, Any] = {}
-        for option, default in self.options.items():
-            value = kwargs.get(option, default)
-            if type(value) is not type(default):
-                raise ValueError(f"{self.name}.{option} must be a {type(default).__name__}, got {value!r}")
-            self.option_values[option] = value
 
     # ------------------------------------------------------------------ symbolic
     @abstractmethod

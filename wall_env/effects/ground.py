@@ -10,7 +10,10 @@ with ``r`` an effective rotor radius, the one parameter (for multirotors the gai
 larger than for one isolated rotor, see Sanchez-Cuevas et al., "Characterization of
 the aerodynamic ground effect and its influence in multirotor control", IJAE 2017;
 an effective radius absorbs that). The height is clamped at ``r / 2`` so the gain
-stays finite (at most 4/3). The extra thrust ``(gain - 1) f_j`` acts along +z_body at
+stays finite (at most 4/3). With the option ``distance_offset`` (a second parameter, the
+distance offset ``k2`` of Sanchez-Cuevas et al.) the gain follows ``h_j + offset``:
+``1 / (1 - (r / (4 (h_j + offset)))^2)``, their ``1 / (1 - (1/k1) (R / (d + k2))^2)``
+with ``k1 = 16 (R / r)^2``. The extra thrust ``(gain - 1) f_j`` acts along +z_body at
 the rotor, so unequal heights also give a moment.
 """
 
@@ -21,10 +24,18 @@ import casadi as ca
 from wall_env.effects.base import Effect, FlightContext, Parameter, Wrench
 
 
-def image_rotor_gain(radius: ca.SX, distance: ca.SX) -> ca.SX:
-    """Thrust ratio ``1 / (1 - (r / 4h)^2)`` with the distance clamped at ``r / 2``."""
-    h = ca.fmax(distance, radius / 2.0)
+def image_rotor_gain(radius: ca.SX, distance: ca.SX, offset: ca.SX | float = 0.0) -> ca.SX:
+    """Thrust ratio ``1 / (1 - (r / (4 (h + offset)))^2)`` with ``h + offset`` clamped at ``r / 2``.
+
+    With the offset this is Sanchez-Cuevas et al.'s form ``1 / (1 - (1/k1) (R / (d + k2))^2)``
+    for a rotor of radius ``R``: ``k2 = offset`` and ``k1 = 16 (R / r)^2``, ``r`` the effective radius.
+    """
+    h = ca.fmax(distance + offset, radius / 2.0)
     return 1.0 / (1.0 - (radius / (4.0 * h)) ** 2)
+
+
+OFFSET = Parameter("offset", "m", 0.0, -0.05, 0.5,
+                   "distance offset k2 of Sanchez-Cuevas et al. (the gain follows the distance plus this)")
 
 
 class GroundEffect(Effect):
@@ -32,6 +43,8 @@ class GroundEffect(Effect):
     description = "per-rotor thrust gain near the ground plane"
     reference = "Cheeseman & Bennett 1955 (ARC R&M 3021)"
     parameters = (Parameter("radius", "m", 0.06, 1e-3, 0.5, "effective rotor radius of the image-rotor model"),)
+    options = {"distance_offset": False}
+    optional_parameters = {"distance_offset": (OFFSET,)}
 
     def applies_to(self, scene_structure: tuple[int, bool, bool]) -> bool:
         return scene_structure[1]
@@ -40,5 +53,6 @@ class GroundEffect(Effect):
         extra = []
         for j in range(4):
             height = ctx.rotor_position_world(j)[2] - ctx.scene.ground_z
-            extra.append((image_rotor_gain(theta["radius"], height) - 1.0) * ctx.rotor_thrusts[j])
+            extra.append((image_rotor_gain(theta["radius"], height, theta.get("offset", 0.0)) - 1.0)
+                         * ctx.rotor_thrusts[j])
         return Wrench.from_rotor_thrust_changes(ctx, extra)

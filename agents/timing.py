@@ -1,0 +1,61 @@
+"""Where a training run's time goes: env steps, the rest of the rollouts, and the PPO updates.
+
+:class:`TimeSplit` is a callback that times each rollout (``on_rollout_start`` to
+``on_rollout_end``) and takes the time the vector env spent inside ``step`` from the env
+itself when it counts it (:class:`~agents.batched_vec_env.BatchedVecEnv` does); the
+remainder of the training time is the learner's updates (and callbacks such as
+evaluations). ``split()`` gives seconds and shares for the model card.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from stable_baselines3.common.callbacks import BaseCallback
+
+__all__ = ["TimeSplit"]
+
+
+class TimeSplit(BaseCallback):
+    """Times rollouts and updates; see the module docstring."""
+
+    def __init__(self, env: Any = None):
+        super().__init__()
+        self.env = env  # the unwrapped vector env that counts its own step time (``step_time_s``), if any
+        self.rollout_s = 0.0
+        self._training_start = 0.0
+        self._rollout_start = 0.0
+        self.total_s = 0.0
+        self._env_time_at_start = 0.0
+
+    def _env_time(self) -> float:
+        return float(getattr(self.env, "step_time_s", 0.0)) if self.env is not None else 0.0
+
+    def _on_training_start(self) -> None:
+        self._training_start = time.perf_counter()
+        self._env_time_at_start = self._env_time()
+
+    def _on_rollout_start(self) -> None:
+        self._rollout_start = time.perf_counter()
+
+    def _on_rollout_end(self) -> None:
+        self.rollout_s += time.perf_counter() - self._rollout_start
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_training_end(self) -> None:
+        self.total_s = time.perf_counter() - self._training_start
+
+    def split(self) -> dict[str, float]:
+        """Seconds and shares of the training time: env steps, the rest of the rollouts (policy
+        inference, buffers, wrappers), and updates plus callbacks."""
+        total = self.total_s or (time.perf_counter() - self._training_start)
+        env_s = self._env_time() - self._env_time_at_start
+        parts = {"env_step_s": env_s, "rollout_other_s": max(self.rollout_s - env_s, 0.0),
+                 "update_and_callbacks_s": max(total - self.rollout_s, 0.0)}
+        out = {k: round(v, 2) for k, v in parts.items()}
+        out.update({k[:-2] + "_share": round(v / total, 3) if total > 0 else 0.0 for k, v in parts.items()})
+        out["total_s"] = round(total, 2)
+        return out

@@ -1,0 +1,147 @@
+"""Which fitted parameters the flight determined, and what to do with those it did not.
+
+A parameter is *determined* when its 95 % confidence interval (value +- 1.96 standard
+errors) is finite, excludes the value at which it has no effect (:data:`NULL_VALUES`:
+zero drag, zero force, zero wind, no suction, a thrust scale of one) and stays away
+from the bounds of its range. Nothing undetermined goes into the model file:
+
+- an undetermined entry of a vector parameter (drag along one body axis, one
+  component of a steady force or of the wind) is set to its null value: that axis
+  gets nothing from this effect;
+- an effect whose main scalar parameter (``k_s``, ``d_thr``, ``radius``, ``scale``) is
+  undetermined is left out altogether.
+
+Each such case is reported with the manoeuvre that would determine it
+(:data:`MANOEUVRES`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wall_env.effects import Effect
+
+__all__ = ["Z_95", "NULL_VALUES", "MANOEUVRES", "Undetermined", "undetermined_cases", "restrict", "determined",
+           "separating_manoeuvre"]
+
+Z_95 = 1.96
+NULL_VALUES = {"k_s": 0.0, "d_thr": 0.0, "D": 0.0, "C": 0.0, "F": 0.0, "w": 0.0, "scale": 1.0, "radius": 0.0}
+_AXES = "xyz"
+MANOEUVRES = {
+    ("wall_suction", "k_s"): "fly with the rotors within 0.15 m of the wall, at several distances",
+    ("wall_suction", "d_thr"): "fly from 0.3 m in to 0.07 m from the wall and back, slowly",
+    ("ground_effect", "radius"): "hover at several heights from 0.1 m to 0.5 m above the ground",
+    ("ground_effect", "offset"): "hover at several heights from 0.1 m to 0.5 m above the ground",
+    ("ceiling_effect", "radius"): "hover at several distances from 0.1 m to 0.5 m under the ceiling",
+    ("ceiling_effect", "offset"): "hover at several distances from 0.1 m to 0.5 m under the ceiling",
+    ("thrust_scale", "scale"): "climb and descend briskly (thrust varying by 20 % or more)",
+    ("constant_force", "F"): "a longer flight (the force is within its noise)",
+}
+
+
+class Undetermined(dict):
+    """``{"effect", "parameter", "name", "index", "value", "std", "reason", "action", "manoeuvre"}``."""
+
+
+def _manoeuvre(effect: str, name: str, index: int | None) -> str:
+    if name in ("D", "C") and index is not None:
+        return f"fly back and forth along body {_AXES[index]} at 1 m/s or more"
+    if name == "w" and index is not None:
+        return f"fly back and forth along world {_AXES[index]} at 1 m/s or more, at several speeds"
+    return MANOEUVRES.get((effect, name), "fly where this effect acts, over a wider range")
+
+
+def _reason(value: float, std: float, low: float, high: float, null: float | None) -> str | None:
+    if not np.isfinite(std):
+        return "its standard error is not finite (the flight does not constrain it)"
+    lo, hi = value - Z_95 * std, value + Z_95 * std
+    if null is not None and lo <= null <= hi:
+        return f"its 95 % interval [{lo:.4g}, {hi:.4g}] contains {null:g}, where it has no effect"
+    span = high - low
+    if lo <= low + 1e-6 * span or hi >= high - 1e-6 * span:
+        return f"its 95 % interval [{lo:.4g}, {hi:.4g}] reaches a bound of its range [{low:g}, {high:g}]"
+    return None
+
+
+def undetermined_cases(effects: list[Effect], stds: list[dict]) -> list[Undetermined]:
+    """Every parameter entry the flight did not determine (see the module text)."""
+    cases = []
+    for effect, std in zip(effects, stds):
+        values = effect.params_dict()
+        for p in effect.parameters:
+            value = np.atleast_1d(np.asarray(values[p.name], dtype=float))
+            error = np.atleast_1d(np.asarray(std.get(p.name, np.nan), dtype=float))
+            if error.size != value.size:
+                error = np.full(value.size, np.nan)
+            null = NULL_VALUES.get(p.name)
+            for i in range(value.size):
+                reason = _reason(float(value[i]), float(error[i]), p.low, p.high, null)
+                if reason is None:
+                    continue
+                index = i if p.size > 1 else None
+                nullable = p.size > 1 or p.name == "offset"
+                cases.append(Undetermined(
+                    effect=effect.name, parameter=p.name if index is None else f"{p.name}[{i}]", name=p.name,
+                    index=index, value=float(value[i]), std=float(error[i]), reason=reason,
+                    action=f"set to {null or 0.0:g} in the model file" if nullable else "effect left out of the model file",
+                    manoeuvre=_manoeuvre(effect.name, p.name, index)))
+    return cases
+
+
+def restrict(effects: list[Effect], cases: list[Undetermined]) -> list[Effect]:
+    """``effects`` with the undetermined entries of ``cases`` nulled and the effects they rule out left out."""
+    out = []
+    for effect in effects:
+        mine = [c for c in cases if c["effect"] == effect.name]
+        if any(c["action"].startswith("effect left out") for c in mine):
+            continue
+        values = effect.params_dict()
+        for c in mine:
+            null = NULL_VALUES.get(c["name"], 0.0)
+            if c["index"] is None:
+                values[c["name"]] = null
+            else:
+                entries = list(np.atleast_1d(np.asarray(values[c["name"]], dtype=float)))
+                entries[c["index"]] = null
+                values[c["name"]] = entries
+        if mine and len(mine) >= sum(p.size for p in effect.parameters if p.name in NULL_VALUES):
+            continue  # every entry nulled: nothing left of this effect
+        out.append(type(effect)(**values, **effect.option_values))
+    return out
+
+
+def determined(effects: list[Effect], stds: list[dict]) -> tuple[list[Effect], list[dict], list[Undetermined]]:
+    """The determined part of ``effects``, their standard errors (NaN where nulled) and the undetermined cases."""
+    cases = undetermined_cases(effects, stds)
+    kept = restrict(effects, cases)
+    names = {e.name for e in kept}
+    kept_std = []
+    for effect, std in zip(effects, stds):
+        if effect.name not in names:
+            continue
+        std = {k: (list(v) if isinstance(v, list) else v) for k, v in std.items()}
+        for c in cases:
+            if c["effect"] == effect.name:
+                if c["index"] is None:
+                    std[c["name"]] = float("nan")
+                else:
+                    std[c["name"]][c["index"]] = float("nan")
+        kept_std.append(std)
+    return kept, kept_std, cases
+
+
+SEPARATING = {
+    frozenset({"thrust_scale", "constant_force"}): "climb and descend briskly (thrust varying by 20 % or more): "
+                                                   "a thrust scale grows with the thrust, a steady force does not",
+    frozenset({"linear_drag", "quadratic_drag"}): "fly at several speeds, from 0.3 m/s to 3 m/s: linear and "
+                                                  "quadratic drag part at high speed",
+    frozenset({"ground_effect", "thrust_scale"}): "hover at several heights above the ground and far from it",
+    frozenset({"ceiling_effect", "thrust_scale"}): "hover at several distances under the ceiling and far from it",
+    frozenset({"constant_force", "linear_drag"}): "fly back and forth at several speeds in each direction",
+    frozenset({"constant_force", "quadratic_drag"}): "fly back and forth at several speeds in each direction",
+}
+
+
+def separating_manoeuvre(a: str, b: str) -> str:
+    """The flight that tells effect ``a`` from effect ``b``."""
+    return SEPARATING.get(frozenset({a, b}), f"fly where {a} acts and {b} does not (and the other way round)")

@@ -1,0 +1,155 @@
+"""Hidden-effect logs for checking discovery: effects (and the literature's fuller forms) flown, then found.
+
+:func:`draw` picks parameters in realistic ranges for one *form* of :data:`FORMS` and a
+flight that excites it; :func:`draw_pair` two forms flown together. :func:`check`
+flies such logs with ``discovery.fly`` (PID, simulator command noise, default
+measurement noise), runs :class:`~discovery.workflow.Discovery` on them, told nothing,
+and compares what it found with what was flown. ``wall-inspector bench-discover
+--acceptance`` prints the figures.
+
+Ranges: wall suction k_s 3.5-8 N/m, d_thr 0.11-0.15 m (paper: 4.1 N/m, 0.132 m);
+ground and ceiling effective radius 6-10 cm and 5-8 cm (6-9 cm with the distance offset
+of 1-4 cm, flown 5 to 22 cm from the surface); a steady force paired with wall suction
+points away from the wall;
+thrust error 5-15 % either way; steady force 0.15-0.5 N per axis; extra linear drag
+0.1-0.4 N s/m per axis; quadratic drag 0.05-0.15 N s^2/m^2 per axis, with a steady
+horizontal wind of 1-3 m/s in the ``_wind`` form.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+__all__ = ["FORMS", "PAIRS", "draw", "draw_pair", "spec", "fly_and_discover"]
+
+ARM = 0.1 / math.sqrt(2.0)  # the default vehicle's rotor offset along body x (m)
+FORMS = ("wall_suction", "wall_suction_scaled", "ground_effect", "ground_effect_offset", "ceiling_effect",
+         "ceiling_effect_offset", "thrust_scale", "constant_force", "linear_drag", "quadratic_drag",
+         "quadratic_drag_wind")
+PAIRS = (("wall_suction", "constant_force"), ("wall_suction_scaled", "constant_force"),
+         ("ground_effect_offset", "constant_force"), ("ceiling_effect_offset", "thrust_scale"),
+         ("ground_effect", "thrust_scale"), ("linear_drag", "constant_force"), ("quadratic_drag_wind", "thrust_scale"),
+         ("thrust_scale", "constant_force"), ("quadratic_drag", "constant_force"))
+_NEAR_WIDE = {"amplitude": (0.6, 0.6, 0.085), "period": (7.0, 9.0, 3.5)}  # 0.05 to 0.22 m from the surface
+
+
+def _suction_survey(k_s: float, d_thr: float) -> dict[str, Any]:
+    d_min = max(0.075, d_thr - min(0.06, 0.5 / (2 * k_s)))  # pull at most ~0.5 N, never nearer than 7.5 cm
+    d_max = d_thr + 0.03
+    return {"amplitude": ((d_max - d_min) / 2, 0.6, 0.3), "period": (6.0, 9.0, 5.0),
+            "centre": ((d_max + d_min) / 2 + ARM, 0.0, 1.0)}
+
+
+def draw(form: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``({"name", "params"}, fly keywords)`` for one form of :data:`FORMS`."""
+    params: dict[str, Any]
+    if form.startswith("wall_suction"):
+        k_s, d_thr = rng.uniform(3.5, 8.0), rng.uniform(0.11, 0.15)
+        params = {"k_s": k_s, "d_thr": d_thr}
+        if form == "wall_suction_scaled":
+            params["thrust_scaling"] = True
+        return {"name": "wall_suction", "params": params}, {"scenario": "wall-survey",
+                                                             "survey": _suction_survey(k_s, d_thr)}
+    if form.startswith("ground_effect"):
+        params = {"radius": rng.uniform(0.06, 0.10)}
+        if form == "ground_effect_offset":  # two parameters of one curve: a wider range of heights tells them apart
+            params = {"radius": rng.uniform(0.06, 0.09), "offset": rng.uniform(0.01, 0.04)}
+            return {"name": "ground_effect", "params": params}, {
+                "scenario": "ground-survey", "survey": {**_NEAR_WIDE, "centre": (1.5, 0.0, 0.135)}}
+        return {"name": "ground_effect", "params": params}, {"scenario": "ground-survey"}
+    if form.startswith("ceiling_effect"):
+        params = {"radius": rng.uniform(0.05, 0.08)}
+        if form == "ceiling_effect_offset":
+            params = {"radius": rng.uniform(0.06, 0.09), "offset": rng.uniform(0.01, 0.04)}
+            return {"name": "ceiling_effect", "params": params}, {
+                "scenario": "ceiling-survey", "survey": {**_NEAR_WIDE, "centre": (1.5, 0.0, 1.865)}}
+        return {"name": "ceiling_effect", "params": params}, {"scenario": "ceiling-survey"}
+    if form == "thrust_scale":
+        return {"name": form, "params": {"scale": 1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(0.05, 0.15)}}, \
+            {"scenario": "survey"}
+    if form == "constant_force":
+        return {"name": form, "params": {"F": list(rng.choice([-1.0, 1.0], 3) * rng.uniform(0.15, 0.5, 3))}}, \
+            {"scenario": "survey"}
+    if form == "linear_drag":
+        return {"name": form, "params": {"D": list(rng.uniform(0.1, 0.4, 3))}}, {"scenario": "survey"}
+    if form.startswith("quadratic_drag"):
+        params = {"C": list(rng.uniform(0.05, 0.15, 3))}
+        if form == "quadratic_drag_wind":
+            heading = rng.uniform(0, 2 * math.pi)
+            speed = rng.uniform(1.0, 3.0)
+            params["w"] = [speed * math.cos(heading), speed * math.sin(heading), 0.0]
+        return {"name": "quadratic_drag", "params": params}, {"scenario": "survey"}
+    raise ValueError(f"unknown form {form!r}; known: {FORMS}")
+
+
+def draw_pair(forms: tuple[str, str], rng: np.random.Generator) -> tuple[list[dict], dict[str, Any]]:
+    """Two forms flown together, in the flight of the first (the second acts everywhere)."""
+    first, fly_kwargs = draw(forms[0], rng)
+    second, _ = draw(forms[1], rng)
+    if first["name"] == "wall_suction" and second["name"] == "constant_force":
+        second["params"]["F"][0] = abs(second["params"]["F"][0])  # a breeze off the wall (x = 0, normal +x)
+    return [first, second], fly_kwargs
+
+
+def spec(effects: list[dict]) -> str:
+    """The command-line form of effects, e.g. ``wall_suction:k_s=4.1,d_thr=0.132;constant_force:F=0.2/0/0``."""
+    def value(v):
+        if isinstance(v, bool):
+            return str(v).lower()
+        return "/".join(f"{x:.9g}" for x in v) if isinstance(v, (list, tuple, np.ndarray)) else f"{v:.9g}"
+
+    return ";".join(e["name"] + ":" + ",".join(f"{k}={value(v)}" for k, v in e["params"].items()) for e in effects)
+
+
+def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int, rate_hz: float = 100.0,
+                     duration: float = 30.0) -> dict[str, Any]:
+    """Fly ``effects`` hidden, discover, and compare: named right, parameter errors, held-out gap reduction."""
+    from discovery.fly import fly
+    from discovery.workflow import Discovery
+
+    log, summary = fly(None, "pid", spec(effects), seed, None, duration=duration, rate_hz=rate_hz, **fly_kwargs)
+    if summary["terminated"]:  # the PID hit a surface: no log to judge discovery by
+        return {"flown": effects, "ended_early": True, "collisions": summary["collisions"],
+                "duration_s": summary["duration_s"], "rate_hz": rate_hz, "seed": seed}
+    started = time.perf_counter()
+    found = Discovery().fit(log)
+    runtime = time.perf_counter() - started
+    flown = sorted(e["name"] for e in effects)
+    named = sorted(found.names_)
+    errors: dict[str, float | None] = {}
+    for e in effects:
+        fitted = next((f for f in found.effects_ if f.name == e["name"]), None)
+        for key, true in e["params"].items():
+            if isinstance(true, bool):
+                continue
+            truth = np.atleast_1d(np.asarray(true, dtype=float))
+            if fitted is None or key not in fitted.values:
+                errors[f"{e['name']}.{key}"] = None
+                continue
+            got = np.atleast_1d(fitted.values[key])
+            big = np.abs(truth) > 1e-9
+            if key == "w":  # a wind vector: error relative to the wind speed
+                errors[f"{e['name']}.{key}"] = float(np.linalg.norm(got - truth) / np.linalg.norm(truth))
+            else:
+                errors[f"{e['name']}.{key}"] = float(np.max(np.abs(got[big] - truth[big]) / np.abs(truth[big])))
+    forms_right = all(
+        any(f.name == e["name"] and all(f.option_values.get(k) == v for k, v in _options(e).items())
+            for f in found.effects_) for e in effects)
+    before, after = found.gap_before_["force_rms_N"], found.gap_after_["force_rms_N"]
+    return {"flown": effects, "ended_early": False, "named": named, "named_right": named == flown, "form_right": forms_right,
+            "spurious": sorted(set(named) - set(flown)), "missed": sorted(set(flown) - set(named)),
+            "param_errors": errors, "gap_reduction": 1.0 - after / before if before else None,
+            "gap_before_N": before, "gap_after_N": after, "rate_hz": rate_hz, "seed": seed,
+            "samples": log.n_samples, "collisions": summary["collisions"], "runtime_s": runtime,
+            "undetermined": [f"{c['effect']}.{c['parameter']}" for c in found.undetermined_],
+            "alike": [f"{a['chosen']}~{a['alike']}" for a in found.selection_.alike] if found.selection_ else []}
+
+
+def _options(effect: dict) -> dict[str, bool]:
+    from wall_env.effects import make_effect
+
+    return make_effect(effect["name"], **effect["params"]).option_values

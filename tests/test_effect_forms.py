@@ -1,0 +1,93 @@
+"""The literature's fuller effect forms against their equations, and what discovery writes of a fit."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from discovery.determination import determined, separating_manoeuvre
+from tests.helpers import wrench
+from wall_env.effects import make_effect
+from wall_env.model_file import FlightModel
+from wall_env.scene import Scene
+from wall_env.vehicle import VehicleParams
+
+VEHICLE = VehicleParams()
+CEILING = Scene((), ground_z=0.0, ceiling_z=2.0)
+
+
+def test_ceiling_effect_with_the_distance_offset_is_sanchez_cuevas_form():
+    # Sanchez-Cuevas et al.: T_ICE / T = 1 / (1 - (1/k1) (R / (d + k2))^2); R = 0.033 m rotor, k1 = 2.7, k2 = 0.03 m
+    R_rotor, k1, k2 = 0.033, 2.7, 0.03
+    radius = 4.0 * R_rotor / math.sqrt(k1)  # the effective radius with k1 = 16 (R / r)^2
+    d = 0.12  # rotor centres 12 cm under the ceiling (level vehicle)
+    force, moment = wrench(make_effect("ceiling_effect", radius=radius, offset=k2), CEILING, (0, 0, 2.0 - d))
+    gain = 1.0 / (1.0 - (1.0 / k1) * (R_rotor / (d + k2)) ** 2)
+    assert force == pytest.approx([0, 0, (gain - 1.0) * VEHICLE.hover_thrust], abs=1e-12)
+    assert force[2] == pytest.approx(0.1791, abs=1e-4)  # 1.83 % more thrust at 12 cm
+    assert moment == pytest.approx([0, 0, 0], abs=1e-12)
+    # offset zero (the default) is the one-parameter form exactly
+    plain, _ = wrench(make_effect("ceiling_effect", radius=radius), CEILING, (0, 0, 2.0 - d))
+    zero, _ = wrench(make_effect("ceiling_effect", radius=radius, distance_offset=True), CEILING, (0, 0, 2.0 - d))
+    assert plain == pytest.approx(zero, abs=0) and plain[2] == pytest.approx(
+        (1 / (1 - (radius / (4 * d)) ** 2) - 1) * VEHICLE.hover_thrust, abs=1e-12)
+
+
+def test_ground_effect_offset_shifts_the_distance():
+    r, offset, h = 0.07, 0.02, 0.06
+    force, _ = wrench(make_effect("ground_effect", radius=r, offset=offset), CEILING, (1, 0, h))
+    assert force[2] == pytest.approx((1 / (1 - (r / (4 * (h + offset))) ** 2) - 1) * VEHICLE.hover_thrust, abs=1e-12)
+
+
+@pytest.mark.parametrize("name, coefficient", [("quadratic_drag", (0.1, 0.12, 0.2)), ("linear_drag", (0.3, 0.3, 0.2))])
+def test_drag_in_wind_acts_on_the_air_relative_velocity(name, coefficient):
+    key = "C" if name == "quadratic_drag" else "D"
+    C = np.asarray(coefficient)
+    R = Rotation.from_euler("xyz", [0.1, -0.2, 0.8]).as_matrix()
+    v_world, w_world = np.array([1.0, 0.5, 0.0]), np.array([-2.0, 1.0, 0.0])
+    force, _ = wrench(make_effect(name, **{key: C, "w": w_world}), CEILING, (0, 0, 1), R, v_world)
+    v_air = R.T @ (v_world - w_world)
+    expected = R @ (-C * np.abs(v_air) * v_air) if name == "quadratic_drag" else R @ (-C * v_air)
+    assert force == pytest.approx(expected, abs=1e-12)
+    # hovering in a 2 m/s wind along +x, level: quadratic drag pushes downwind with C_x w^2
+    if name == "quadratic_drag":
+        level, _ = wrench(make_effect(name, C=C, w=[2.0, 0, 0]), CEILING, (0, 0, 1), np.eye(3), (0, 0, 0))
+        assert level == pytest.approx([0.1 * 4.0, 0, 0], abs=1e-12)
+
+
+def test_a_model_file_round_trips_the_fuller_forms(tmp_path):
+    effects = [make_effect("ceiling_effect", radius=0.07, offset=0.02), make_effect("quadratic_drag", w=[1, 2, 0]),
+               make_effect("wall_suction", thrust_scaling=True)]
+    FlightModel(VEHICLE, effects).save(tmp_path / "model.json")
+    loaded = FlightModel.load(tmp_path / "model.json")
+    assert loaded.effects == effects
+    assert loaded.effect("ceiling_effect").option_values == {"distance_offset": True}
+
+
+def test_giving_an_optional_parameter_with_its_option_off_is_an_error():
+    with pytest.raises(ValueError, match=r"unknown argument\(s\) \['w'\].*w need\(s\) option \['wind'\] on"):
+        make_effect("quadratic_drag", w=[1, 0, 0], wind=False)
+
+
+def test_undetermined_parameters_never_reach_the_model():
+    drag = make_effect("linear_drag", D=[0.25, 20.0, 0.1])
+    force = make_effect("constant_force", F=[0.3, -0.01, 0.0])
+    scale = make_effect("thrust_scale", scale=1.02)
+    stds = [{"D": [0.01, 148.0, 0.01]}, {"F": [0.01, 0.02, 0.01]}, {"scale": 0.05}]
+    kept, kept_std, cases = determined([drag, force, scale], stds)
+    # drag along body y at its bound with a standard error of 148 N s/m: not written, nulled
+    assert kept[0].values["D"] == pytest.approx([0.25, 0.0, 0.1])
+    assert math.isnan(kept_std[0]["D"][1])
+    # the force's y entry is within its noise: nulled; its z entry is exactly zero: nulled
+    assert kept[1].values["F"] == pytest.approx([0.3, 0.0, 0.0])
+    # a thrust scale whose interval holds 1 is left out
+    assert [e.name for e in kept] == ["linear_drag", "constant_force"]
+    labels = {(c["effect"], c["parameter"]): c for c in cases}
+    assert "reaches a bound" in labels[("linear_drag", "D[1]")]["reason"] or \
+        "contains 0" in labels[("linear_drag", "D[1]")]["reason"]
+    assert labels[("linear_drag", "D[1]")]["manoeuvre"] == "fly back and forth along body y at 1 m/s or more"
+    assert labels[("thrust_scale", "scale")]["action"] == "effect left out of the model file"
+    assert "climb and descend" in separating_manoeuvre("constant_force", "thrust_scale")

@@ -1,0 +1,285 @@
+"""Episodes of ``n`` vehicles advanced together: the body of both environments.
+
+:class:`EnvBatch` holds the state of ``n`` episodes of one configuration
+(:class:`~wall_env.config.EnvConfig`) and steps them with one call of the compiled
+control step (:class:`~wall_env.dynamics.BatchSimulator`, closed-form contact
+included). Observation, reward, termination and info are built with NumPy on all
+rows at once. The single environment (:class:`~wall_env.env.WallInspectorEnv`) is the
+batch of one; the vector environment (:class:`~wall_env.vector_env.WallInspectorVectorEnv`)
+adds Gymnasium's autoreset around the same object. Random numbers come from per-row
+streams (:mod:`wall_env.streams`), so row ``k`` seeded with ``s`` flies exactly as a
+single env seeded with ``s``.
+
+Random draws of an episode, per row and in this order: at reset, one uniform per
+randomised setting (``k_s``, ``d_thr``, ``standoff``, ``mass``, those configured) and nine
+for the start perturbation (position, velocity, roll/pitch/yaw); at each step, four
+normals for the command noise (none without noise).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from wall_env.config import EnvConfig
+from wall_env.contact import SURFACES
+from wall_env.dynamics import STATE_SIZE, BatchSimulator, StateIndex
+from wall_env.observation import CLEARANCE_CAP, OBSERVATION_FIELDS, OBSERVATION_SIZE, PREVIEW_STEPS
+from wall_env.rotations import euler_xyz_to_quat_rows, quat_to_rotation_rows
+from wall_env.streams import RandomStreams
+from wall_env.vehicle import GRAVITY
+
+__all__ = ["EnvBatch", "check_actions", "info_row"]
+
+_NO_SURFACE = np.array([None, *SURFACES], dtype=object)  # collision_surface by code: 0 = none
+
+
+def check_actions(actions: Any, n: int | None) -> np.ndarray:
+    """Actions as a float64 array ``(n, 4)`` (``n=None``: one action ``(4,)``), or a ``ValueError``
+    saying what is wrong. Values outside [-1, 1] are clipped later; NaN and infinity are refused."""
+    shape = (4,) if n is None else (n, 4)
+    array = np.asarray(actions)
+    if array.dtype.kind not in "biuf":
+        raise ValueError(f"action must be real numbers (thrust, wx, wy, wz in [-1, 1]) of shape {shape}, "
+                         f"got dtype {array.dtype}")
+    if array.shape != shape:
+        raise ValueError(f"action must have shape {shape} (thrust, wx, wy, wz in [-1, 1]), got shape {array.shape}")
+    array = array.astype(np.float64)
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"action must be finite, got {array.tolist()}")
+    return array
+
+
+def info_row(info: dict[str, Any], k: int) -> dict[str, Any]:
+    """Row ``k`` of a batch info from :meth:`EnvBatch.infos` (fresh arrays of ``n`` rows, nested
+    dicts), with plain Python scalars; vectors are views of those fresh arrays."""
+    out: dict[str, Any] = {}
+    for key, value in info.items():
+        if type(value) is dict:
+            out[key] = info_row(value, k)
+        elif value.ndim == 1:
+            out[key] = value[k] if value.dtype == object else value[k].item()
+        else:
+            out[key] = value[k]
+    return out
+
+
+class EnvBatch:
+    """``n`` episodes of ``config``; see the module docstring."""
+
+    def __init__(self, config: EnvConfig, n: int):
+        self.config = config
+        self.n = n
+        cfg = config
+        geometry = cfg.geometry
+        scene, reference = cfg.build()
+        self.simulator = BatchSimulator(cfg.vehicle, cfg.truth, scene.structure, cfg.control_dt,
+                                        cfg.physics_substeps, n)
+        self.streams = RandomStreams(n)
+        sim = self.simulator
+        sim.restitution[:] = cfg.restitution
+        self._theta0 = cfg.truth.theta()
+        sim.theta[:] = self._theta0
+        sim.mass[:] = cfg.vehicle.mass
+        sim.scene[:] = geometry.scene_vector
+        self._suction_columns = cfg.suction_columns
+        self._suction_index = cfg.truth.names.index("wall_suction") if "wall_suction" in cfg.truth.names else None
+        self._effect_names = list(cfg.truth.names)
+        self._yaw = float(reference.yaw)
+        self._ref_p, self._ref_v = geometry.p_ref, geometry.v_ref
+        self._preview = cfg.preview_stride * np.arange(1, PREVIEW_STEPS + 1)
+        self._rotors = cfg.vehicle.rotor_positions_array
+        self._n_walls = len(scene.walls)
+        planes = ["wall"] * self._n_walls + (["ground"] if cfg.base_scene.ground_z is not None else []) \
+            + (["ceiling"] if cfg.base_scene.ceiling_z is not None else [])
+        self._plane_codes = np.array([1 + SURFACES.index(p) for p in planes], dtype=np.int64)
+        self._noise_std = cfg.noise_std
+        self._mapping = cfg.action_mapping
+
+        # episode state, one row per vehicle (the state vector itself is simulator.x)
+        self.step_index = np.zeros(n, dtype=np.int64)
+        self.previous_action = np.zeros((n, 4))
+        self.collisions = np.zeros(n, dtype=np.int64)
+        self.command = np.zeros((n, 4))
+        self.surface = np.zeros(n, dtype=np.int64)  # 0: none, else 1 + index in SURFACES
+        self.strayed = np.zeros(n, dtype=bool)
+        self.forces = np.zeros_like(sim.forces)
+        self.R = np.zeros((n, 9))  # column-major per row, of the current state
+        self.distances = np.zeros((n, 4 * self._n_walls))  # column-major (n_walls x 4) per row
+        self.ref_offset = np.zeros((n, 3))
+        self.episode_parameters = {key: np.zeros(n) for key in cfg.randomize}
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, rows: np.ndarray | slice, spread: np.ndarray | float = 1.0) -> None:
+        """Start new episodes in ``rows`` (indices, or ``slice(None)`` for all; start perturbation
+        scaled by ``spread``, 0 or 1)."""
+        cfg, sim = self.config, self.simulator
+        task = cfg.task
+        ranges = cfg.randomize
+        u = self.streams.uniform(rows, len(ranges) + 9)
+        k = u.shape[0]
+        sample = {}
+        for j, (key, (low, high)) in enumerate(ranges.items()):
+            sample[key] = low + (high - low) * u[:, j]
+            self.episode_parameters[key][rows] = sample[key]
+        geometry = cfg.geometry
+        if ranges:
+            theta = np.broadcast_to(self._theta0, (k, self._theta0.size)).copy()
+            for name, column in self._suction_columns.items():
+                if name in sample:
+                    theta[:, column] = sample[name]
+            sim.theta[rows] = theta
+        mass = sample.get("mass", cfg.vehicle.mass)
+        sim.mass[rows, 0] = mass
+        if "standoff" in sample:
+            shift = sample["standoff"] - geometry.standoff
+            sim.scene[rows] = geometry.scene_vector + shift[:, None] * geometry.scene_rate
+            offset = shift[:, None] * geometry.p_rate
+        else:
+            offset = np.zeros((1, 3))
+        self.ref_offset[rows] = offset
+
+        spread = np.reshape(np.asarray(spread, dtype=float), (-1, 1))
+        perturb = (2.0 * u[:, len(ranges):] - 1.0) * spread
+        p0 = self._ref_p[0] + offset + perturb[:, 0:3] * task.start_position_noise
+        v0 = self._ref_v[0] + perturb[:, 3:6] * task.start_velocity_noise
+        tilt = perturb[:, 6:9] * task.start_attitude_noise
+        tilt[:, 2] += self._yaw
+        q = euler_xyz_to_quat_rows(tilt)
+        x = np.empty((k, STATE_SIZE))
+        x[:, StateIndex.p_world] = p0
+        x[:, StateIndex.q_body_to_world] = q
+        x[:, StateIndex.v_world] = v0
+        x[:, StateIndex.omega_body] = 0.0
+        x[:, StateIndex.rotor_thrusts] = np.reshape(mass * (GRAVITY / 4.0), (-1, 1))
+        sim.x[rows] = x
+        R = quat_to_rotation_rows(q)  # (k, 3, 3)
+        self.R[rows] = R.transpose(0, 2, 1).reshape(k, 9)
+        if self._n_walls:
+            rotors_world = p0[:, :, None] + (R.reshape(3 * k, 3) @ self._rotors.T).reshape(k, 3, 4)
+            walls = sim.scene[rows, : 6 * self._n_walls].reshape(k, self._n_walls, 2, 3)
+            normals = walls[:, :, 1]
+            d = (normals[:, :, :, None] * (rotors_world[:, None] - walls[:, :, 0, :, None])).sum(axis=2)  # (k, walls, 4)
+            self.distances[rows] = d.transpose(0, 2, 1).reshape(k, -1)
+        self.step_index[rows] = 0
+        self.previous_action[rows] = 0.0
+        self.collisions[rows] = 0
+        self.command[rows] = 0.0
+        self.surface[rows] = 0
+        self.strayed[rows] = False
+        self.forces[rows] = 0.0
+
+    # ------------------------------------------------------------------ step
+    def step(self, actions: np.ndarray, active: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Advance every row one control step with ``actions (n, 4)`` (checked, float64).
+
+        ``active``: rows whose random streams advance (default all); the vector env passes
+        the rows it is not about to reset, so their draws match a single env's.
+        Returns ``reward, terminated, truncated`` (arrays of ``n``).
+        """
+        cfg, sim = self.config, self.simulator
+        a = np.minimum(np.maximum(actions, -1.0), 1.0)
+        command = self._mapping.to_physical(a)
+        if cfg.noise:
+            command += self.streams.normal(slice(None), 4, advance=False) * self._noise_std
+            if active is None:
+                self.streams.counters += np.uint64(4)
+            else:
+                self.streams.counters[active] += np.uint64(4)
+        sim.u[:] = command
+        sim.step()
+        sim.x[:] = sim.x_next
+        self.R[:] = sim.R
+        self.distances[:] = sim.distances
+        self.forces[:] = sim.forces
+        self.command[:] = command
+        self.step_index += 1
+
+        touching = sim.penetrations > 0.0
+        contact = touching.any(axis=1)
+        self.surface[:] = np.where(contact, self._plane_codes[np.argmax(touching, axis=1)] if touching.shape[1]
+                                   else 0, 0)
+        self.collisions += contact
+
+        x = sim.x
+        i = self.step_index
+        w = cfg.reward_weights
+        p_error = x[:, StateIndex.p_world] - (self._ref_p[i] + self.ref_offset)
+        v_error = x[:, StateIndex.v_world] - self._ref_v[i]
+        error = np.sqrt((p_error * p_error).sum(axis=1))
+        omega = x[:, StateIndex.omega_body]
+        change = a - self.previous_action
+        reward = (w["alive"] - w["position"] * error
+                  - w["velocity"] * np.sqrt((v_error * v_error).sum(axis=1))
+                  - w["smoothness"] * (change * change).sum(axis=1)
+                  - w["body_rate"] * (omega * omega).sum(axis=1))
+        strayed = ~(error <= cfg.max_tracking_error)  # also catches a NaN state
+        reward -= cfg.collision_penalty * (contact | strayed)
+        terminated = strayed | (contact & cfg.terminate_on_collision)
+        truncated = ~terminated & (i >= cfg.n_steps)
+        self.strayed[:] = strayed
+        self.previous_action[:] = a
+        return reward, terminated, truncated
+
+    # ------------------------------------------------------------------ what the agent and the user see
+    def observations(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """Observations of ``rows`` (default all), ``(k, 48)`` float32 (layout: :mod:`wall_env.observation`)."""
+        f = OBSERVATION_FIELDS
+        x = self.simulator.x[rows]
+        i = self.step_index[rows]
+        n = x.shape[0]
+        offset = self.ref_offset[rows]
+        obs = np.empty((n, OBSERVATION_SIZE), dtype=np.float32)
+        p_ref = self._ref_p[i]
+        obs[:, f["p_world"]] = x[:, StateIndex.p_world]
+        obs[:, f["v_world"]] = x[:, StateIndex.v_world]
+        obs[:, f["R_body_to_world"]] = self.R[rows].reshape(n, 3, 3).transpose(0, 2, 1).reshape(n, 9)
+        obs[:, f["omega_body"]] = x[:, StateIndex.omega_body]
+        obs[:, f["p_error"]] = x[:, StateIndex.p_world] - (p_ref + offset)
+        obs[:, f["v_error"]] = x[:, StateIndex.v_world] - self._ref_v[i]
+        preview = self._ref_p[i[:, None] + self._preview] - p_ref[:, None, :]
+        obs[:, f["reference_preview"]] = preview.reshape(n, -1)
+        if self._n_walls:
+            d = self.distances[rows].reshape(n, 4, self._n_walls)  # [row, rotor, wall]
+            obs[:, f["rotor_clearance"]] = np.minimum(d.min(axis=2), CLEARANCE_CAP)
+            nearest = np.argmin(d.min(axis=1), axis=1)
+            normals = self.simulator.scene[rows, : 6 * self._n_walls].reshape(n, self._n_walls, 2, 3)[:, :, 1]
+            obs[:, f["wall_normal"]] = normals[np.arange(n), nearest]
+        else:
+            obs[:, f["rotor_clearance"]] = CLEARANCE_CAP
+            obs[:, f["wall_normal"]] = 0.0
+        obs[:, f["previous_action"]] = self.previous_action[rows]
+        obs[:, f["time"]] = (i * self.config.control_dt)[:, None]
+        return obs
+
+    def infos(self) -> dict[str, Any]:
+        """The info of every row as arrays (keys: see :mod:`wall_env.env`)."""
+        x = self.simulator.x
+        i = self.step_index
+        n = self.n
+        forces = self.forces.reshape(n, -1, 3)  # [row, effect, axis]
+        suction = forces[:, self._suction_index].copy() if self._suction_index is not None else np.zeros((n, 3))
+        if self._n_walls:
+            clearance = self.distances.min(axis=1) - self.config.vehicle.duct_radius
+        else:
+            clearance = np.full(n, np.inf)
+        return {
+            "time": i * self.config.control_dt,
+            "p_world": x[:, StateIndex.p_world].copy(),
+            "q_body_to_world": x[:, StateIndex.q_body_to_world].copy(),
+            "v_world": x[:, StateIndex.v_world].copy(),
+            "omega_body": x[:, StateIndex.omega_body].copy(),
+            "rotor_thrusts": x[:, StateIndex.rotor_thrusts].copy(),
+            "p_ref": self._ref_p[i] + self.ref_offset,
+            "v_ref": self._ref_v[i].copy(),
+            "suction_force_world": suction,
+            "effect_forces_world": {name: forces[:, k].copy() for k, name in enumerate(self._effect_names)},
+            "collision": self.surface > 0,
+            "collision_surface": _NO_SURFACE[self.surface],
+            "collisions": self.collisions.copy(),
+            "wall_clearance": clearance,
+            "command": self.command.copy(),
+            "strayed": self.strayed.copy(),
+        }
