@@ -104,10 +104,11 @@ def test_tune_through_ray_tunes_optuna_searcher(cluster, tmp_path):
 
 
 # ====================================================================== train --ray
-TINY_TRAIN = ["train", "--env", "WallHover-v0", "--timesteps", "6144", "--n-envs", "2", "--workers", "1",
+STEPS, EVERY = 40960, 4096  # a few seconds of batched training: long enough to be killed after a checkpoint
+TINY_TRAIN = ["train", "--env", "WallHover-v0", "--timesteps", str(STEPS), "--n-envs", "2", "--workers", "1",
               "--set", "ppo.n_steps=128", "--set", "ppo.batch_size=256", "--set", "ppo.n_epochs=1",
               "--set", "card_eval.episodes=1", "--set", "env_kwargs.duration=1.0", "--eval-freq", "1000000",
-              "--checkpoint-freq", "512", "--no-progress", "--quiet"]
+              "--checkpoint-freq", str(EVERY), "--no-progress", "--quiet"]
 
 
 def test_train_plans_one_run_per_seed_and_sweep_point(tmp_path):
@@ -127,7 +128,7 @@ def test_train_plans_one_run_per_seed_and_sweep_point(tmp_path):
     assert sorted((r["config"]["seed"], r["config"]["ppo"]["learning_rate"]) for r in runs) == [
         (s, lr) for s in (0, 1, 2) for lr in (1e-4, 3e-4)]
     assert all(r["config"]["ppo"]["n_epochs"] == 1 for r in runs)
-    assert runs[0]["command"].startswith("wall-inspector train --env WallInspector/WallHover-v0 --timesteps 6144")
+    assert runs[0]["command"].startswith(f"wall-inspector train --env WallInspector/WallHover-v0 --timesteps {STEPS}")
 
 
 @pytest.mark.parametrize("args, message", [
@@ -172,12 +173,12 @@ def test_train_sweep_of_two_trials_survives_a_killed_worker(cluster, tmp_path):
     assert code == 0 and len(killed) == 1
     rows = json.loads((out / "summary.json").read_text())["runs"]
     assert [r["set"] for r in rows] == [["ppo.learning_rate=0.0003"], ["ppo.learning_rate=0.001"]]
-    assert all(r["timesteps"] == 6144 for r in rows)
+    assert all(r["timesteps"] == STEPS for r in rows)
     restarted = [r for r in rows if r["restarts"]]
-    assert len(restarted) == 1 and 512 <= restarted[0]["resumed_from"] < 6144  # from its last checkpoint
+    assert len(restarted) == 1 and EVERY <= restarted[0]["resumed_from"] < STEPS  # from its last checkpoint
     for r in rows:
         card = json.loads((out / r["name"] / "model_card.json").read_text())
-        assert card["training"]["total_timesteps"] == 6144
+        assert card["training"]["total_timesteps"] == STEPS
         assert card["training"]["resumed"] is bool(r["restarts"])
         assert card["config"]["ppo"]["learning_rate"] in (3e-4, 1e-3)
         assert (out / r["name"] / "best" / "model.zip").is_file()
