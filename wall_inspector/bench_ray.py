@@ -225,22 +225,26 @@ def plan(args: argparse.Namespace) -> int:
             trial_steps = int(training["total_timesteps"])
         except (OSError, ValueError, KeyError, TypeError):
             raise SystemExit(f"--trial-card {args.trial_card}: not a model card (training.total_wall_time_s)") from None
-    lines = [f"| machines | CPUs | all flights of `compare` (min) | {args.trials}-run training sweep (min) |",
-             "|---:|---:|---:|---:|"]
+    lines = [f"| machines | CPUs | all flights of `compare` (min) | the same, one flight at a time per machine (min) | "
+             f"{args.trials}-run training sweep (min) |", "|---:|---:|---:|---:|---:|"]
     rows = []
     for m in machines:
         flights_s = makespan(seconds, m * args.cpus_per_machine)
-        row = {"machines": m, "cpus": m * args.cpus_per_machine, "flights_min": round(flights_s / 60, 2)}
+        row = {"machines": m, "cpus": m * args.cpus_per_machine, "flights_min": round(flights_s / 60, 2),
+               "flights_one_per_machine_min": round(makespan(seconds, m) / 60, 2)}
         if trial_minutes is not None:
             per_machine = args.cpus_per_machine // args.cpus_per_trial
             row["sweep_min"] = round(makespan([trial_minutes] * args.trials, m * per_machine), 1)
         rows.append(row)
         sweep = f"{row['sweep_min']:.0f}" if "sweep_min" in row else "-"
-        lines.append(f"| {m} | {row['cpus']} | {row['flights_min']:.1f} | {sweep} |")
+        lines.append(f"| {m} | {row['cpus']} | {row['flights_min']:.1f} | {row['flights_one_per_machine_min']:.1f} | "
+                     f"{sweep} |")
     note = (f"\nFrom {len(seconds)} flights measured by `compare --ray` ({sum(seconds) / 60:.1f} min of flying in all, "
             f"longest flight {max(seconds):.1f} s): each column is the list-scheduling makespan of the measured "
             f"per-flight times on machines x {args.cpus_per_machine} CPUs, one flight per CPU, in the order compare "
-            "submits them (`wall-inspector bench-ray --plan`). Ray's start and per-flight overhead are not included")
+            "submits them (`wall-inspector bench-ray --plan`); the next column as if a machine flew one flight at a time, "
+            "as this shared machine's two CPUs did in `bench-ray` (two flights at once took about twice as long each). "
+            "Ray's start and per-flight overhead are not included")
     if trial_minutes is not None:
         note += (f"; the sweep is {args.trials} training runs of {trial_minutes:.1f} min each ({trial_steps:,} env steps: "
                  f"the measured wall time in `{args.trial_card}`), {args.cpus_per_trial} CPUs per run, so "
