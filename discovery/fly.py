@@ -149,6 +149,9 @@ def make_policy(policy: str, env: gym.Env, model: str | Path | None = None,
     """``pid``, ``mpc``, ``scmpc`` (from :mod:`controllers`) or the path of a saved Stable-Baselines3 agent.
 
     ``policy_kwargs`` go to the controller's ``from_env`` (e.g. ``{"kp": [20, 20, 10]}`` for the PID).
+    The controllers start from the authors' settings (``preset="paper"``), around which the
+    scenarios' gains were chosen, so that a log does not change when a tuned preset does;
+    ``{"preset": "tuned"}`` flies the task's tuned preset instead.
     """
     name = str(policy).lower()
     kwargs = dict(policy_kwargs or {})
@@ -160,6 +163,7 @@ def make_policy(policy: str, env: gym.Env, model: str | Path | None = None,
             if name != "scmpc":
                 raise ValueError("--policy-model is for --policy scmpc")
             kwargs["model"] = str(model)
+        kwargs.setdefault("preset", "paper")
         return cls.from_env(env, **kwargs)
     if kwargs:
         raise ValueError("--policy-kwargs is for pid, mpc and scmpc")

@@ -54,7 +54,8 @@ def test_evaluate_policy_with_a_subprocess_vector_env():
 
 # ====================================================================== evaluate()
 def test_evaluate_records_metrics_that_match_the_steps():
-    result = evaluate(PID.from_env, "WallInspector/WallCircle-v0", [0, 1],
+    # the authors' PID gains: pulled onto the wall at k_s = 10 N/m, so contacts are recorded too
+    result = evaluate(lambda env: PID.from_env(env, preset="paper"), "WallInspector/WallCircle-v0", [0, 1],
                       {"k_s": 10.0, "d_thr": 0.1, "terminate_on_collision": False, "duration": 3.0})
     m = result.metrics()
     assert m["episodes"] == 2 and m["steps"] == 600

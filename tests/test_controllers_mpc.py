@@ -154,9 +154,10 @@ def test_mpc_tracks_a_slow_circle_away_from_the_wall(policy_class):
 
 def test_sc_mpc_compensates_the_suction_that_pulls_nominal_mpc_into_the_wall():
     kwargs = {"k_s": 10.0, "d_thr": 0.1, "noise": False, "terminate_on_collision": False, "duration": 5.0}
-    nominal = evaluate(MPC.from_env, "WallInspector/WallCircle-v0", [0], kwargs).metrics()
-    compensated = evaluate(lambda env: SCMPC.from_env(env, k_s=10.0, d_thr=0.1), "WallInspector/WallCircle-v0",
-                           [0], kwargs).metrics()
+    nominal = evaluate(lambda env: MPC.from_env(env, preset="paper"), "WallInspector/WallCircle-v0", [0],
+                       kwargs).metrics()
+    compensated = evaluate(lambda env: SCMPC.from_env(env, k_s=10.0, d_thr=0.1, preset="paper"),
+                           "WallInspector/WallCircle-v0", [0], kwargs).metrics()
     # nominal MPC sticks to the wall; SC-MPC (authors' weights) touches it at most in the ramp-up
     assert nominal["collisions"] > 100
     assert compensated["collisions"] <= 2
@@ -164,10 +165,12 @@ def test_sc_mpc_compensates_the_suction_that_pulls_nominal_mpc_into_the_wall():
 
 
 def test_suction_is_compensated_only_with_the_force_at_the_predicted_states():
-    # noise-free sweep, 1.9 cm closest duct clearance: the design choice of controllers.mpc.reference
+    # noise-free sweep, 1.9 cm closest duct clearance, the authors' weights: the design choice of
+    # controllers.mpc.reference
     kwargs = {"k_s": 4.1, "d_thr": 0.132, "noise": False, "terminate_on_collision": False}
-    default = evaluate(SCMPC.from_env, "WallInspector/WallSweep-v0", [0], kwargs).metrics()
-    on_reference = evaluate(lambda env: SCMPC.from_env(env, force_at_prediction=False),
+    default = evaluate(lambda env: SCMPC.from_env(env, preset="paper"), "WallInspector/WallSweep-v0", [0],
+                       kwargs).metrics()
+    on_reference = evaluate(lambda env: SCMPC.from_env(env, preset="paper", force_at_prediction=False),
                             "WallInspector/WallSweep-v0", [0], kwargs).metrics()
     assert default["collisions"] == 0 and default["wall_normal_rmse"] < 0.012
     assert on_reference["collisions"] > 100 and on_reference["wall_normal_rmse"] > 0.04

@@ -12,7 +12,7 @@ from controllers.tuning import flight_cost
 from controllers.tuning.objective import TrackingObjective
 from controllers.tuning.space import PID_RANGES, SearchSpace
 from wall_inspector.cli import main
-from wall_inspector.tune import parse_seeds
+from wall_inspector.tune import parse_seeds, recorded_command
 
 TINY = ["--env", "WallHover-v0", "--seeds", "1", "--heldout-seeds", "2", "--set", "duration=0.5", "--set",
         "standoff=0.3", "--no-progress"]
@@ -82,8 +82,10 @@ def test_bad_tune_arguments_are_one_line_and_exit_2(tmp_path, capsys, args, mess
     assert not (tmp_path / "x").exists()  # nothing was made before the check
 
 
-def test_seed_lists_and_the_search_space():
+def test_seed_lists_the_search_space_and_the_recorded_command():
     assert parse_seeds("1000-1002,7", "--seeds") == [1000, 1001, 1002, 7]
+    assert recorded_command(["--start", "/home/me/start.yaml", "--out", "runs/x", "--set", "k_s=1 0"]) == \
+        "wall-inspector tune --start start.yaml --out runs/x --set 'k_s=1 0'"
     space = SearchSpace("pid", load_preset("paper").methods["pid"])
     values = space.values_of(space.base)
     assert values == {"kp_xy": 8.0, "kp_z": 10.0, "kv_xy": 4.0, "kv_z": 6.0, "k_attitude_xy": 6.0, "k_attitude_z": 4.0}

@@ -219,7 +219,11 @@ def run(args: argparse.Namespace) -> int:
     mpc_weights = (lambda w: dataclasses.replace(w, **changes)) if changes else None
     policies = pt.controller_policies(args.weights, mpc_weights=mpc_weights)
     if args.weights != "paper" and not args.no_authors:
-        policies.update(pt.controller_policies("paper", label_suffix=pt.AUTHORS, dynamics_only=False))
+        authors = pt.controller_policies("paper", label_suffix=pt.AUTHORS, dynamics_only=False)
+        for method, label in (("pid", "PID"), ("mpc", "MPC"), ("scmpc", "SC-MPC")):
+            if all(pt._preset_for(args.weights, method, task) == "paper" for task in tasks):
+                del authors[label + pt.AUTHORS]  # its main row already flies the authors' settings
+        policies.update(authors)
     note = _preset_note(args.weights, changes)
     with contextlib.ExitStack() as stack:
         executor = None

@@ -83,6 +83,13 @@ def parse_seeds(text: str, option: str) -> list[int]:
     return seeds
 
 
+def recorded_command(arguments: list[str]) -> str:
+    """The command line as a preset's provenance records it: absolute paths (this machine's
+    folders) shortened to their file names, relative ones kept."""
+    return " ".join(["wall-inspector", "tune", *(shlex.quote(Path(a).name if Path(a).is_absolute() else a)
+                                                 for a in arguments)])
+
+
 def _env_kwargs(items: list[str]) -> dict:
     import yaml
 
@@ -146,8 +153,8 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, TypeError) as exc:
         raise SystemExit(str(exc)) from None  # one line, exit status 2 (wall_inspector.cli)
 
-    command = "wall-inspector tune " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 1 \
-        and sys.argv[1] == "tune" else f"wall-inspector tune --env {env_id} --method {method}"
+    command = recorded_command(sys.argv[2:]) if len(sys.argv) > 1 and sys.argv[1] == "tune" \
+        else f"wall-inspector tune --env {env_id} --method {method}"
     objective = default_objective(args.objective, env_id, method, train, env_kwargs)
     tuner = Tuner(objective, heldout, out, budget_trials=args.budget_trials,
                   budget_minutes=args.budget_minutes or None, seed=args.sampler_seed, space=space, command=command,
