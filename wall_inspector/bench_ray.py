@@ -32,6 +32,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from wall_env.validation import check_output_folder
+
 TARGETS = {"speedup_2_vs_1": 1.7, "overhead_s": 0.5}
 
 
@@ -274,9 +276,10 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"--repeats must be in [1, 100], got {args.repeats}")
     if args.duration is not None and not 0.05 <= args.duration <= 3600:
         raise SystemExit(f"--duration must be in [0.05, 3600] s, got {args.duration}")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise SystemExit(f"--out {out} exists and is not a folder")
+    try:
+        out = check_output_folder(args.out)
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
     try:
         import ray  # noqa: F401
     except ImportError:

@@ -37,7 +37,6 @@ import contextlib
 import dataclasses
 import json
 import time
-from pathlib import Path
 from typing import Any
 
 
@@ -187,6 +186,7 @@ def budget_markdown(rows: list[dict[str, Any]]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from controllers import paper_tables as pt
+    from wall_env.validation import check_output_folder
 
     try:
         for name in ("seeds_i", "seeds_ii"):
@@ -207,9 +207,7 @@ def run(args: argparse.Namespace) -> int:
                                               env_kwargs={**s.env_kwargs, **extra}) for s in pt.TABLE_II]
         tasks = sorted({s.env_id.split("/")[-1].removesuffix("-v0") for s in scenarios})
         _check_preset(args.weights, tasks)
-        out = Path(args.out)
-        if out.exists() and not out.is_dir():
-            raise UsageError(f"--out {out} exists and is not a folder")
+        out = check_output_folder(args.out)
         from wall_inspector import ray_backend
 
         ray_backend.check_arguments(args)

@@ -113,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
     from controllers.presets import PRESET_DIR, load_preset, tuned_preset_path
     from controllers.tuning import SearchSpace, Tuner, default_objective
     from wall_env.tasks import task_env_id, task_slug
+    from wall_env.validation import check_output_folder
 
     # ---------------------------------------------------------- every argument checked before any work
     try:
@@ -142,9 +143,7 @@ def run(args: argparse.Namespace) -> int:
         for start in args.start:
             load_preset(start, method=space_method)
         slug = "paper_table_i" if method == "mpc+scmpc" else f"{task_slug(env_id)}_{method}"
-        out = Path(args.out) if args.out else Path("runs") / "tune" / slug
-        if out.exists() and not out.is_dir():
-            raise ValueError(f"--out {out} exists and is not a folder")
+        out = check_output_folder(Path(args.out) if args.out else Path("runs") / "tune" / slug)
         from wall_inspector import ray_backend
 
         ray_backend.check_arguments(args)
