@@ -149,6 +149,22 @@ def _speedup(cpu_counts: list[int], seeds: int, duration: float | None, rounds: 
     return out
 
 
+def _local_and_remote_times(fly: Any, remote_fly: Any, flight: Any, repeats: int) -> tuple[list[float], list[float]]:
+    """Seconds of ``repeats`` flights in this process and as Ray tasks, interleaved, so that a change
+    of the machine's load meets both alike."""
+    import ray
+
+    local, remote = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fly(flight)
+        local.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        ray.get(remote_fly.remote(flight))
+        remote.append(time.perf_counter() - t0)
+    return local, remote
+
+
 def _overhead(repeats: int, duration: float | None) -> dict[str, Any]:
     import dataclasses
 
@@ -159,33 +175,19 @@ def _overhead(repeats: int, duration: float | None) -> dict[str, Any]:
 
     scenarios, policies = _table_ii(1, duration)
     flight = pt.Flight(scenarios[0], "SC-MPC", policies["SC-MPC"], 0)
-    pt.fly(flight)  # warm: compiled code loaded, caches filled
-    local, remote = [], []
+    steps = len(pt.fly(flight).time)  # warm: compiled code loaded, caches filled
     with ray_backend.session(ray_backend.LOCAL, 1):
         remote_fly = ray.remote(num_cpus=ray_backend.CPUS_PER_FLIGHT)(pt.fly)
         t0 = time.perf_counter()
         ray.get(remote_fly.remote(flight))
         cold = time.perf_counter() - t0
-        for _ in range(repeats):  # interleaved, so that a change of the machine's load meets both alike
-            t0 = time.perf_counter()
-            pt.fly(flight)
-            local.append(time.perf_counter() - t0)
-            t0 = time.perf_counter()
-            ray.get(remote_fly.remote(flight))
-            remote.append(time.perf_counter() - t0)
+        local, remote = _local_and_remote_times(pt.fly, remote_fly, flight, repeats)
         short_scenario = dataclasses.replace(scenarios[0], env_kwargs={**scenarios[0].env_kwargs, "duration": 0.2})
         short = pt.Flight(short_scenario, "SC-MPC", policies["SC-MPC"], 0)
-        short_local, short_remote = [], []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            pt.fly(short)
-            short_local.append(time.perf_counter() - t0)
-            t0 = time.perf_counter()
-            ray.get(remote_fly.remote(short))
-            short_remote.append(time.perf_counter() - t0)
+        short_local, short_remote = _local_and_remote_times(pt.fly, remote_fly, short, repeats)
     local_s, remote_s = statistics.median(local), statistics.median(remote)
     fixed_s = statistics.median(short_remote) - statistics.median(short_local)
-    return {"flight": "SC-MPC, WallSweep-v0, seed 0", "steps": len(pt.fly(flight).time),
+    return {"flight": "SC-MPC, WallSweep-v0, seed 0", "steps": steps,
             "local_median_s": round(local_s, 4), "ray_median_s": round(remote_s, 4),
             "overhead_s": round(remote_s - local_s, 4), "first_task_s": round(cold, 3),
             "first_task_overhead_s": round(cold - local_s, 3), "repeats": repeats,

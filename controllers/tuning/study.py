@@ -217,7 +217,6 @@ class Tuner:
 
         trial = study.ask()
         settings = self.space.suggest(trial)
-        steps = 0
 
         def report(i: int, value: float) -> bool:
             trial.report(value, i)
