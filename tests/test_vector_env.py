@@ -272,3 +272,26 @@ def test_bench_env_batched_writes_its_table_json_and_plot(tmp_path):
         payload["batched"][1]["steps_per_s"] / payload["single_steps_per_s"])
     assert payload["memory"]["resets"] == 3 and "load_average_start" in payload["machine"]
     assert "| 8 |" in files["md"].read_text() and files["png"].stat().st_size > 1000
+
+
+def test_a_stream_of_one_draws_its_step_noise_from_a_block_that_equals_drawing_each_step():
+    from wall_env.streams import RandomStreams
+
+    one, reference = RandomStreams(1), RandomStreams(1)
+    drawn, expected = [], []
+    for seed in (3, 4):  # reseeding must drop the block drawn for the old key
+        one.seed([0], [seed])
+        reference.seed([0], [seed])
+        for step in range(150):  # past the block's 64 steps, with resets drawing odd and even counts
+            if step % 37 == 0:
+                extra = 9 + step % 2
+                one.uniform(slice(None), extra)
+                reference.uniform(slice(None), extra)
+            drawn.append(one.step_normals(4)[0].copy())
+            expected.append(reference.normal(slice(None), 4)[0])
+    assert np.array_equal(np.array(drawn), np.array(expected))
+    assert one.counters[0] == reference.counters[0]
+    batch = RandomStreams(3)
+    batch.seed([0, 1, 2], [3, 4, 5])
+    batch.step_normals(4, active=np.array([True, False, True]))
+    assert batch.counters.tolist() == [4, 0, 4]

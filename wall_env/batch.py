@@ -88,7 +88,12 @@ class EnvBatch:
         self._effect_names = list(cfg.truth.names)
         self._yaw = float(reference.yaw)
         self._ref_p, self._ref_v = geometry.p_ref, geometry.v_ref
-        self._preview = cfg.preview_stride * np.arange(1, PREVIEW_STEPS + 1)
+        # the observation's reference preview at every step, p_ref(t + k stride) - p_ref(t) (steps, 12):
+        # one gather per observation instead of a gather and a subtraction
+        preview = cfg.preview_stride * np.arange(1, PREVIEW_STEPS + 1)
+        last = len(self._ref_p) - preview[-1]
+        steps = np.arange(last)
+        self._preview_table = (self._ref_p[steps[:, None] + preview] - self._ref_p[steps, None, :]).reshape(last, -1)
         self._rotors = cfg.vehicle.rotor_positions_array
         self._n_walls = len(scene.walls)
         planes = ["wall"] * self._n_walls + (["ground"] if cfg.base_scene.ground_z is not None else []) \
@@ -159,8 +164,12 @@ class EnvBatch:
         if self._n_walls:
             rotors_world = p0[:, :, None] + (R.reshape(3 * k, 3) @ self._rotors.T).reshape(k, 3, 4)
             walls = sim.scene[rows, : 6 * self._n_walls].reshape(k, self._n_walls, 2, 3)
-            normals = walls[:, :, 1]
-            d = (normals[:, :, :, None] * (rotors_world[:, None] - walls[:, :, 0, :, None])).sum(axis=2)  # (k, walls, 4)
+            normals, points = walls[:, :, 1], walls[:, :, 0]
+            # n . (r - c) for every wall and rotor, written out over the three axes (NumPy's batched
+            # matmul of 1x3 by 3x4 matrices costs more than these six array operations)
+            d = -(normals * points).sum(axis=2)[:, :, None]  # (k, walls, 4)
+            for axis in range(3):
+                d = d + normals[:, :, axis, None] * rotors_world[:, None, axis, :]
             self.distances[rows] = d.transpose(0, 2, 1).reshape(k, -1)
         self.step_index[rows] = 0
         self.previous_action[rows] = 0.0
@@ -183,11 +192,7 @@ class EnvBatch:
         a = np.minimum(np.maximum(actions, -1.0), 1.0)
         command = self._mapping.to_physical(a)
         if cfg.noise:
-            command += self.streams.normal(slice(None), 4, advance=False) * self._noise_std
-            if active is None:
-                self.streams.counters += np.uint64(4)
-            else:
-                self.streams.counters[active] += np.uint64(4)
+            command += self.streams.step_normals(4, active) * self._noise_std
         sim.u[:] = command
         sim.step()
         sim.x[:] = sim.x_next
@@ -239,14 +244,16 @@ class EnvBatch:
         obs[:, f["omega_body"]] = x[:, StateIndex.omega_body]
         obs[:, f["p_error"]] = x[:, StateIndex.p_world] - (p_ref + offset)
         obs[:, f["v_error"]] = x[:, StateIndex.v_world] - self._ref_v[i]
-        preview = self._ref_p[i[:, None] + self._preview] - p_ref[:, None, :]
-        obs[:, f["reference_preview"]] = preview.reshape(n, -1)
+        obs[:, f["reference_preview"]] = self._preview_table[i]
         if self._n_walls:
             d = self.distances[rows].reshape(n, 4, self._n_walls)  # [row, rotor, wall]
             obs[:, f["rotor_clearance"]] = np.minimum(d.min(axis=2), CLEARANCE_CAP)
-            nearest = np.argmin(d.min(axis=1), axis=1)
-            normals = self.simulator.scene[rows, : 6 * self._n_walls].reshape(n, self._n_walls, 2, 3)[:, :, 1]
-            obs[:, f["wall_normal"]] = normals[np.arange(n), nearest]
+            if self._n_walls == 1:
+                obs[:, f["wall_normal"]] = self.simulator.scene[rows, 3:6]
+            else:
+                nearest = np.argmin(d.min(axis=1), axis=1)
+                normals = self.simulator.scene[rows, : 6 * self._n_walls].reshape(n, self._n_walls, 2, 3)[:, :, 1]
+                obs[:, f["wall_normal"]] = normals[np.arange(n), nearest]
         else:
             obs[:, f["rotor_clearance"]] = CLEARANCE_CAP
             obs[:, f["wall_normal"]] = 0.0

@@ -25,14 +25,15 @@ __all__ = ["quat_to_rotation", "quat_multiply", "skew", "so3_exp", "so3_log", "e
 def euler_xyz_to_quat_rows(angles: np.ndarray) -> np.ndarray:
     """Quaternions ``(n, 4)`` [w, x, y, z] of extrinsic x-y-z rotations ``(n, 3)`` (roll, pitch, yaw;
     SciPy's ``Rotation.from_euler("xyz", angles)``)."""
-    half = 0.5 * np.asarray(angles, dtype=float)
+    half = 0.5 * np.ascontiguousarray(np.asarray(angles, dtype=float).T)  # (3, n): contiguous rows
     c, s = np.cos(half), np.sin(half)
-    cx, cy, cz = c[:, 0], c[:, 1], c[:, 2]
-    sx, sy, sz = s[:, 0], s[:, 1], s[:, 2]
-    return np.stack([cz * cy * cx + sz * sy * sx,
-                     cz * cy * sx - sz * sy * cx,
-                     cz * sy * cx + sz * cy * sx,
-                     sz * cy * cx - cz * sy * sx], axis=1)
+    cx, cy, cz = c
+    sx, sy, sz = s
+    czcy, szsy, czsy, szcy = cz * cy, sz * sy, cz * sy, sz * cy
+    return np.stack([czcy * cx + szsy * sx,
+                     czcy * sx - szsy * cx,
+                     czsy * cx + szcy * sx,
+                     szcy * cx - czsy * sx], axis=1)
 
 
 def quat_to_rotation_rows(q: np.ndarray) -> np.ndarray:

@@ -26,6 +26,7 @@ _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
 _TO_UNIT = 2.0**-53
+_BLOCK_SIZE = 256  # normals a stream of one draws ahead (64 steps of command noise)
 
 
 def stream_key(seed: int | None) -> np.uint64:
@@ -48,12 +49,18 @@ class RandomStreams:
         self.keys = np.zeros(n, dtype=np.uint64)
         self.counters = np.zeros(n, dtype=np.uint64)
         self._offsets: dict[int, np.ndarray] = {}
+        # a stream of one (the single env) draws its step noise from a block of future normals:
+        # the draws depend only on key and counter, so the block holds exactly what drawing them
+        # one step at a time would give (until the key changes, which clears it)
+        self._block: np.ndarray | None = None
+        self._block_start = 0
 
     def seed(self, rows: Sequence[int] | np.ndarray, seeds: Sequence[int | None]) -> None:
         """Restart the streams of ``rows`` from ``seeds`` (one per row, ``None`` for entropy)."""
         rows = np.asarray(rows, dtype=np.intp)
         self.keys[rows] = [stream_key(s) for s in seeds]
         self.counters[rows] = 0
+        self._block = None
 
     def _steps(self, count: int) -> np.ndarray:
         steps = self._offsets.get(count)
@@ -84,4 +91,23 @@ class RandomStreams:
         out = np.empty_like(u)
         out[:, 0::2] = radius * np.cos(angle)
         out[:, 1::2] = radius * np.sin(angle)
+        return out
+
+    def step_normals(self, count: int, active: np.ndarray | None = None) -> np.ndarray:
+        """``count`` standard normals for every row (``(n, count)``, as :meth:`normal` draws them),
+        advancing the counters of the ``active`` rows only (a bool mask; default all)."""
+        if active is None and len(self.keys) == 1:
+            start = int(self.counters[0])
+            offset = start - self._block_start
+            block = self._block
+            if block is None or offset < 0 or offset % 2 or offset + count > len(block):
+                block = self._block = self.normal(slice(None), _BLOCK_SIZE, advance=False)[0]
+                self._block_start, offset = start, 0
+            self.counters[0] = start + count
+            return block[None, offset:offset + count]
+        out = self.normal(slice(None), count, advance=False)
+        if active is None:
+            self.counters += np.uint64(count)
+        else:
+            self.counters[active] += np.uint64(count)
         return out
