@@ -33,6 +33,7 @@ from wall_env.vehicle import GRAVITY
 __all__ = ["EnvBatch", "check_actions", "info_row"]
 
 _NO_SURFACE = np.array([None, *SURFACES], dtype=object)  # collision_surface by code: 0 = none
+_ROW_MAJOR = np.array([0, 3, 6, 1, 4, 7, 2, 5, 8])  # entries of a column-major 3x3 in row-major order
 
 
 def check_actions(actions: Any, n: int | None) -> np.ndarray:
@@ -93,7 +94,9 @@ class EnvBatch:
         preview = cfg.preview_stride * np.arange(1, PREVIEW_STEPS + 1)
         last = len(self._ref_p) - preview[-1]
         steps = np.arange(last)
-        self._preview_table = (self._ref_p[steps[:, None] + preview] - self._ref_p[steps, None, :]).reshape(last, -1)
+        preview_table = (self._ref_p[steps[:, None] + preview] - self._ref_p[steps, None, :]).reshape(last, -1)
+        # what an observation reads of the reference at step i, in one row: p_ref, v_ref, preview (18)
+        self._ref_table = np.concatenate([self._ref_p[:last], self._ref_v[:last], preview_table], axis=1)
         self._rotors = cfg.vehicle.rotor_positions_array
         self._n_walls = len(scene.walls)
         planes = ["wall"] * self._n_walls + (["ground"] if cfg.base_scene.ground_z is not None else []) \
@@ -235,22 +238,22 @@ class EnvBatch:
         x = self.simulator.x[rows]
         i = self.step_index[rows]
         n = x.shape[0]
-        offset = self.ref_offset[rows]
+        ref = self._ref_table[i]  # p_ref, v_ref, preview
         obs = np.empty((n, OBSERVATION_SIZE), dtype=np.float32)
-        p_ref = self._ref_p[i]
         obs[:, f["p_world"]] = x[:, StateIndex.p_world]
         obs[:, f["v_world"]] = x[:, StateIndex.v_world]
-        obs[:, f["R_body_to_world"]] = self.R[rows].reshape(n, 3, 3).transpose(0, 2, 1).reshape(n, 9)
+        obs[:, f["R_body_to_world"]] = self.R[rows][:, _ROW_MAJOR]
         obs[:, f["omega_body"]] = x[:, StateIndex.omega_body]
-        obs[:, f["p_error"]] = x[:, StateIndex.p_world] - (p_ref + offset)
-        obs[:, f["v_error"]] = x[:, StateIndex.v_world] - self._ref_v[i]
-        obs[:, f["reference_preview"]] = self._preview_table[i]
+        obs[:, f["p_error"]] = x[:, StateIndex.p_world] - (ref[:, 0:3] + self.ref_offset[rows])
+        obs[:, f["v_error"]] = x[:, StateIndex.v_world] - ref[:, 3:6]
+        obs[:, f["reference_preview"]] = ref[:, 6:]
         if self._n_walls:
-            d = self.distances[rows].reshape(n, 4, self._n_walls)  # [row, rotor, wall]
-            obs[:, f["rotor_clearance"]] = np.minimum(d.min(axis=2), CLEARANCE_CAP)
             if self._n_walls == 1:
+                obs[:, f["rotor_clearance"]] = np.minimum(self.distances[rows], CLEARANCE_CAP)
                 obs[:, f["wall_normal"]] = self.simulator.scene[rows, 3:6]
             else:
+                d = self.distances[rows].reshape(n, 4, self._n_walls)  # [row, rotor, wall]
+                obs[:, f["rotor_clearance"]] = np.minimum(d.min(axis=2), CLEARANCE_CAP)
                 nearest = np.argmin(d.min(axis=1), axis=1)
                 normals = self.simulator.scene[rows, : 6 * self._n_walls].reshape(n, self._n_walls, 2, 3)[:, :, 1]
                 obs[:, f["wall_normal"]] = normals[np.arange(n), nearest]
@@ -258,31 +261,31 @@ class EnvBatch:
             obs[:, f["rotor_clearance"]] = CLEARANCE_CAP
             obs[:, f["wall_normal"]] = 0.0
         obs[:, f["previous_action"]] = self.previous_action[rows]
-        obs[:, f["time"]] = (i * self.config.control_dt)[:, None]
+        obs[:, OBSERVATION_FIELDS["time"].start] = i * self.config.control_dt
         return obs
 
     def infos(self) -> dict[str, Any]:
         """The info of every row as arrays (keys: see :mod:`wall_env.env`)."""
-        x = self.simulator.x
+        x = self.simulator.x.copy()  # one copy: the state entries below are views of it
         i = self.step_index
         n = self.n
-        forces = self.forces.reshape(n, -1, 3)  # [row, effect, axis]
-        suction = forces[:, self._suction_index].copy() if self._suction_index is not None else np.zeros((n, 3))
+        forces = self.forces.reshape(n, -1, 3).copy()  # [row, effect, axis]
+        suction = forces[:, self._suction_index] if self._suction_index is not None else np.zeros((n, 3))
         if self._n_walls:
             clearance = self.distances.min(axis=1) - self.config.vehicle.duct_radius
         else:
             clearance = np.full(n, np.inf)
         return {
             "time": i * self.config.control_dt,
-            "p_world": x[:, StateIndex.p_world].copy(),
-            "q_body_to_world": x[:, StateIndex.q_body_to_world].copy(),
-            "v_world": x[:, StateIndex.v_world].copy(),
-            "omega_body": x[:, StateIndex.omega_body].copy(),
-            "rotor_thrusts": x[:, StateIndex.rotor_thrusts].copy(),
+            "p_world": x[:, StateIndex.p_world],
+            "q_body_to_world": x[:, StateIndex.q_body_to_world],
+            "v_world": x[:, StateIndex.v_world],
+            "omega_body": x[:, StateIndex.omega_body],
+            "rotor_thrusts": x[:, StateIndex.rotor_thrusts],
             "p_ref": self._ref_p[i] + self.ref_offset,
-            "v_ref": self._ref_v[i].copy(),
+            "v_ref": self._ref_v[i],
             "suction_force_world": suction,
-            "effect_forces_world": {name: forces[:, k].copy() for k, name in enumerate(self._effect_names)},
+            "effect_forces_world": {name: forces[:, k] for k, name in enumerate(self._effect_names)},
             "collision": self.surface > 0,
             "collision_surface": _NO_SURFACE[self.surface],
             "collisions": self.collisions.copy(),
