@@ -28,7 +28,7 @@ Cost convention: ``F = sum r^T r`` (the weighted squared residuals, no factor 1/
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
@@ -37,9 +37,10 @@ import numpy as np
 from controllers.mpc.cost import STAGE_PARAM_SIZE, MPCProblem
 from controllers.mpc.manifold import POINT_SIZE, TANGENT_SIZE, boxplus, boxplus_first_order
 from controllers.policy import SolverFailure
-from wall_env.codegen import CompiledFunction
+from wall_env.codegen import BatchedFunction, CompiledFunction
 
-__all__ = ["LMSettings", "LMResult", "LevenbergMarquardt", "build_iteration_function", "build_cost_function"]
+__all__ = ["LMSettings", "LMResult", "LMInfo", "LevenbergMarquardt", "build_iteration_function", "build_cost_function",
+           "build_solve_function", "solve_function"]
 
 _B = TANGENT_SIZE
 
@@ -228,7 +229,106 @@ def build_cost_function(problem: MPCProblem) -> ca.Function:
     return ca.Function("mpc_cost", [Z, start, S, g], [cost])
 
 
-# ====================================================================== numeric driver
+# ====================================================================== the whole solve, compiled
+class LMInfo:
+    """Entries of the ``info`` output of :func:`build_solve_function`."""
+
+    cost = 0
+    initial_cost = 1
+    iterations = 2
+    accepted = 3
+    converged = 4
+    failed = 5  # non-finite cost at the initial guess
+    size = 6
+
+
+class LMSettingsIndex:
+    """Entries of the ``settings`` input of :func:`build_solve_function`."""
+
+    initial_damping = 0
+    relative_tolerance = 1
+    step_tolerance = 2
+    max_iterations = 3
+    size = 4
+
+
+def _finite(x):
+    """1 where ``x`` is finite (``inf - inf`` and ``nan - nan`` are NaN, which compares unequal to 0)."""
+    return (x - x) == 0
+
+
+def _lm_step(problem: MPCProblem, iteration: ca.Function) -> tuple[ca.Function, ca.Function]:
+    """One LM iteration with its accept/reject decision and Nielsen's damping update, on a packed state
+    ``[vec(Z), lambda, nu, cost, initial cost, iterations, accepted, converged, done, failed]``; and the
+    same signature doing nothing (taken once the solve is done)."""
+    N = problem.horizon
+    n_z = POINT_SIZE * N
+    state = ca.MX.sym("state", n_z + 9)
+    start = ca.MX.sym("start", POINT_SIZE)
+    S = ca.MX.sym("S", STAGE_PARAM_SIZE, N)
+    g = ca.MX.sym("global", problem.global_size)
+    settings = ca.MX.sym("settings", LMSettingsIndex.size)
+    Z = ca.reshape(state[:n_z], POINT_SIZE, N)
+    lam, nu, _, initial, iterations, accepted = (state[n_z + i] for i in range(6))
+    Z_trial, c, c_trial, predicted, _, step = iteration(Z, start, S, g, lam)
+    first = iterations == 0
+    failed = first * (1 - _finite(c))
+    ok = (c_trial < c) * (predicted > 0) * _finite(c_trial)
+    rho = (c - c_trial) / predicted
+    converged_ok = ca.logic_or(c - c_trial <= settings[LMSettingsIndex.relative_tolerance] * c,
+                               step <= settings[LMSettingsIndex.step_tolerance])
+    converged_rejected = (step <= settings[LMSettingsIndex.step_tolerance]) * _finite(c_trial)
+    converged = ca.if_else(ok, converged_ok, converged_rejected)
+    iterations = iterations + 1
+    done = ca.logic_or(ca.logic_or(converged, iterations >= settings[LMSettingsIndex.max_iterations]), failed)
+    new_state = ca.vertcat(
+        ca.vec(ca.if_else(ok, Z_trial, Z)),
+        ca.if_else(ok, lam * ca.fmax(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), lam * nu),
+        ca.if_else(ok, 2.0, 2.0 * nu),
+        ca.if_else(ok, c_trial, c),
+        ca.if_else(first, c, initial),
+        iterations,
+        accepted + ok,
+        converged,
+        done,
+        failed,
+    )
+    inputs = [state, start, S, g, settings]
+    active = ca.Function("mpc_lm_step", inputs, [new_state])
+    idle = ca.Function("mpc_lm_idle", inputs, [state])
+    return active, idle
+
+
+def build_solve_function(problem: MPCProblem, max_iterations: int) -> ca.Function:
+    """``mpc_lm_solve(Z0[19xN], start[19], S[17xN], global, settings[4]) -> (Z[19xN], info[6])``:
+    the whole Levenberg-Marquardt solve as one function.
+
+    ``max_iterations`` iterations are unrolled, each a conditional call (CasADi's
+    ``Function.if_else``, an ``if`` in the generated C) that is skipped once the solve
+    has converged, failed or used ``settings[3]`` iterations, so a warm solve that
+    converges in 3 iterations pays for 3. ``settings = [initial damping, relative
+    tolerance, step tolerance, iteration limit]`` (:class:`LMSettingsIndex`), ``info``
+    as :class:`LMInfo`.
+    """
+    N = problem.horizon
+    iteration, _ = _functions(problem)
+    active, idle = _lm_step(problem, iteration)
+    step_or_skip = ca.Function.if_else("mpc_lm_step_or_skip", idle, active)
+    Z0 = ca.MX.sym("Z0", POINT_SIZE, N)
+    start = ca.MX.sym("start", POINT_SIZE)
+    S = ca.MX.sym("S", STAGE_PARAM_SIZE, N)
+    g = ca.MX.sym("global", problem.global_size)
+    settings = ca.MX.sym("settings", LMSettingsIndex.size)
+    n_z = POINT_SIZE * N
+    state = ca.vertcat(ca.vec(Z0), settings[LMSettingsIndex.initial_damping], 2.0, math.nan, math.nan, 0, 0, 0, 0, 0)
+    for _ in range(int(max_iterations)):
+        state = step_or_skip(state[n_z + 7], state, start, S, g, settings)
+    info = ca.vertcat(state[n_z + 2], state[n_z + 3], state[n_z + 4], state[n_z + 5], state[n_z + 6], state[n_z + 8])
+    return ca.Function("mpc_lm_solve", [Z0, start, S, g, settings], [ca.reshape(state[:n_z], POINT_SIZE, N), info],
+                       ["Z0", "start", "S", "global", "settings"], ["Z", "info"])
+
+
+# ====================================================================== numeric interface
 @dataclass(frozen=True)
 class LMSettings:
     """Iteration limits and tolerances of :class:`LevenbergMarquardt`.
@@ -259,6 +359,15 @@ class LMSettings:
         if not (0 <= self.step_tolerance < 1):
             raise ValueError(f"step_tolerance must be in [0, 1), got {self.step_tolerance!r}")
 
+    @property
+    def unrolled(self) -> int:
+        """Iterations the compiled solve unrolls: the larger of the two limits."""
+        return int(max(self.max_iterations, self.max_iterations_cold))
+
+    def vector(self, max_iterations: int) -> np.ndarray:
+        """The ``settings`` input of :func:`build_solve_function` for an iteration limit."""
+        return np.array([self.initial_damping, self.relative_tolerance, self.step_tolerance, float(max_iterations)])
+
 
 @dataclass
 class LMResult:
@@ -268,10 +377,17 @@ class LMResult:
     iterations: int
     accepted: int
     converged: bool
-    history: list[float] = field(default_factory=list)
+
+    @classmethod
+    def from_outputs(cls, Z: np.ndarray, info: np.ndarray) -> LMResult:
+        """The result of one row of :func:`build_solve_function`'s outputs (``Z`` flat or ``(19, N)``)."""
+        return cls(np.asarray(Z).reshape(POINT_SIZE, -1, order="F").copy(), float(info[LMInfo.cost]),
+                   float(info[LMInfo.initial_cost]), int(info[LMInfo.iterations]), int(info[LMInfo.accepted]),
+                   bool(info[LMInfo.converged]))
 
 
 _FUNCTIONS: dict[tuple, tuple[ca.Function, ca.Function]] = {}
+_SOLVE_FUNCTIONS: dict[tuple, ca.Function] = {}
 
 
 def _functions(problem: MPCProblem) -> tuple[ca.Function, ca.Function]:
@@ -282,13 +398,24 @@ def _functions(problem: MPCProblem) -> tuple[ca.Function, ca.Function]:
     return _FUNCTIONS[key]
 
 
+def solve_function(problem: MPCProblem, max_iterations: int) -> ca.Function:
+    """:func:`build_solve_function`, built once per problem structure, iteration count and process."""
+    key = (problem.structure_key, int(max_iterations))
+    if key not in _SOLVE_FUNCTIONS:
+        _SOLVE_FUNCTIONS[key] = build_solve_function(problem, max_iterations)
+    return _SOLVE_FUNCTIONS[key]
+
+
 class LevenbergMarquardt:
     """Compiled LM solver of one :class:`~controllers.mpc.cost.MPCProblem` structure.
 
-    The generated C depends on the model's structure, the rotor layout and the
-    horizon only; compiled libraries are cached on disk by
-    :mod:`wall_env.codegen`, so the first construction of a structure costs a few
-    seconds of compilation and later ones (also in new processes) a few milliseconds.
+    :meth:`solve` runs :func:`build_solve_function` (the whole solve in native code) on
+    one problem; the MPC policies embed the very same function in their compiled
+    control step (:mod:`controllers.mpc.step`). The generated C depends on the
+    model's structure, the rotor layout, the horizon and the unrolled iteration count
+    only; compiled libraries are cached on disk by :mod:`wall_env.codegen`, so the
+    first construction of a structure costs some seconds of compilation and later ones
+    (also in new processes) a few milliseconds.
     """
 
     def __init__(self, problem: MPCProblem, settings: LMSettings | None = None):
@@ -297,10 +424,19 @@ class LevenbergMarquardt:
         iteration, cost = _functions(problem)
         self.iteration = CompiledFunction(iteration)
         self.cost_function = CompiledFunction(cost)
-        self._shape = (POINT_SIZE, problem.horizon)
+        self._solvers: dict[int, tuple[BatchedFunction, list[np.ndarray], list[np.ndarray]]] = {}
 
     def cost(self, Z: np.ndarray, start: np.ndarray, S: np.ndarray, g: np.ndarray) -> float:
         return float(self.cost_function(Z, start, S, g)[0][0])
+
+    def _solver(self, unrolled: int) -> tuple[BatchedFunction, list[np.ndarray], list[np.ndarray]]:
+        if unrolled not in self._solvers:
+            function = BatchedFunction(solve_function(self.problem, unrolled))
+            inputs = [np.zeros((1, k)) for k in function.nnz_in]
+            outputs = function.outputs(1)
+            function.bind(inputs, outputs)
+            self._solvers[unrolled] = (function, inputs, outputs)
+        return self._solvers[unrolled]
 
     def solve(self, Z0: np.ndarray, start: np.ndarray, S: np.ndarray, g: np.ndarray, *, cold: bool = False,
               max_iterations: int | None = None) -> LMResult:
@@ -308,38 +444,11 @@ class LevenbergMarquardt:
         non-finite numbers at the initial point."""
         settings = self.settings
         limit = max_iterations or (settings.max_iterations_cold if cold else settings.max_iterations)
-        Z = np.asarray(Z0, dtype=float)
-        lam, nu = settings.initial_damping, 2.0
-        cost = math.nan
-        initial_cost = math.nan
-        history: list[float] = []
-        accepted = 0
-        converged = False
-        iterations = 0
-        for iterations in range(1, limit + 1):
-            Z_trial, c_out, c_trial_out, pred_out, _, step_out = self.iteration(Z, start, S, g, lam)
-            c, c_trial, pred, step = float(c_out[0]), float(c_trial_out[0]), float(pred_out[0]), float(step_out[0])
-            if iterations == 1:
-                initial_cost = c
-                history.append(c)
-                if not math.isfinite(c):
-                    raise SolverFailure(f"non-finite MPC cost {c} at the initial guess")
-            cost = c
-            if math.isfinite(c_trial) and c_trial < c and pred > 0:
-                rho = (c - c_trial) / pred
-                Z = Z_trial.reshape(self._shape, order="F")
-                cost = c_trial
-                accepted += 1
-                history.append(cost)
-                lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-                nu = 2.0
-                if c - c_trial <= settings.relative_tolerance * c or step <= settings.step_tolerance:
-                    converged = True
-                    break
-            else:
-                if step <= settings.step_tolerance and math.isfinite(c_trial):
-                    converged = True  # no move left: at a minimum up to rounding
-                    break
-                lam *= nu
-                nu *= 2.0
-        return LMResult(Z, cost, initial_cost, iterations, accepted, converged, history)
+        function, inputs, outputs = self._solver(max(settings.unrolled, int(limit)))
+        for buffer, value in zip(inputs, (Z0, start, S, g, settings.vector(limit))):
+            buffer[0] = np.ravel(value, order="F")
+        function()
+        info = outputs[1][0]
+        if info[LMInfo.failed]:
+            raise SolverFailure(f"non-finite MPC cost {info[LMInfo.initial_cost]} at the initial guess")
+        return LMResult.from_outputs(outputs[0][0], info)

@@ -50,17 +50,25 @@ import numpy as np
 
 from controllers.env_description import EnvDescription
 from controllers.mpc.cost import InputLimits, MPCProblem, MPCWeights
-from controllers.mpc.lm import LevenbergMarquardt, LMResult, LMSettings
-from controllers.mpc.manifold import POINT_SIZE, PointIndex
-from controllers.mpc.reference import HorizonReference, ReferenceStates
-from controllers.policy import ControllerPolicy, SolverFailure
+from controllers.mpc.lm import LevenbergMarquardt, LMInfo, LMResult, LMSettings
+from controllers.mpc.manifold import POINT_SIZE, STATE_SIZE, PointIndex
+from controllers.mpc.reference import HorizonReference, ReferenceStates, sample_horizons
+from controllers.mpc.step import CompiledStep, StepInput, StepOptions, StepOutput
+from controllers.policy import ControllerPolicy
 from wall_env.aero import AeroModel
 from wall_env.effects import make_effect
 from wall_env.model_file import FlightModel
+from wall_env.observation import OBSERVATION_FIELDS
 from wall_env.validation import check_range
 from wall_env.vehicle import VehicleParams
 
 __all__ = ["MPC", "SCMPC", "SolveRecord", "PAPER_SUCTION", "COMPENSATION_MODES"]
+
+_OBS_P, _OBS_V = OBSERVATION_FIELDS["p_world"], OBSERVATION_FIELDS["v_world"]
+_OBS_R, _OBS_P_ERROR = OBSERVATION_FIELDS["R_body_to_world"], OBSERVATION_FIELDS["p_error"]
+_OBS_TIME = OBSERVATION_FIELDS["time"].start
+# the ``state`` input of the compiled step: p_world, R_body_to_world (column-major), v_world, p_ref_now
+_STATE_P, _STATE_R, _STATE_V, _STATE_P_REF = slice(0, 3), slice(3, 12), slice(12, 15), slice(15, 18)
 
 PAPER_SUCTION = {"k_s": 4.1, "d_thr": 0.132}  # the paper's flight-identified values (Sec. 4.4)
 COMPENSATION_MODES = ("dynamics", "dynamics+attitude")
@@ -76,16 +84,6 @@ class SolveRecord:
     global_params: np.ndarray
     cold: bool
     result: LMResult
-
-
-def pack_point(u: np.ndarray, p_world: np.ndarray, R_body_to_world: np.ndarray, v_world: np.ndarray) -> np.ndarray:
-    """A 19-vector block (see :mod:`controllers.mpc.manifold`)."""
-    point = np.empty(POINT_SIZE)
-    point[PointIndex.u] = u
-    point[PointIndex.p_world] = p_world
-    point[PointIndex.R_body_to_world] = np.asarray(R_body_to_world).reshape(3, 3).ravel(order="F")
-    point[PointIndex.v_world] = v_world
-    return point
 
 
 class MPC(ControllerPolicy):
@@ -138,8 +136,11 @@ class MPC(ControllerPolicy):
         self.solve_times: list[float] = []
         self.solve_cpu_times: list[float] = []
         self.step_times: list[float] = []
+        self.cpu_step_times: list[float] = []
         self.iteration_counts: list[int] = []
-        self.last_solves: list[SolveRecord | None] = []
+        self.step = CompiledStep(self.problem, self.attitude_problem, self.shift, self.solver.settings)
+        self._last_cold = np.zeros(0, dtype=bool)
+        self._last_ok = np.zeros(0, dtype=bool)
 
     @classmethod
     def from_env(cls, env: Any, *, preset: str | Path | None = "tuned", **kwargs: Any) -> MPC:
@@ -159,23 +160,40 @@ class MPC(ControllerPolicy):
         self.solve_times.clear()
         self.solve_cpu_times.clear()
         self.step_times.clear()
+        self.cpu_step_times.clear()
         self.iteration_counts.clear()
 
     # ------------------------------------------------------------------ control
-    def _before_batch(self, n: int) -> None:
-        if len(self.last_solves) != n:
-            self.last_solves = [None] * n
-
     def _new_memory(self, scene, reference) -> dict[str, Any]:
         memory = super()._new_memory(scene, reference)
-        memory["Z"] = None
         memory["global"] = self.problem.global_params(scene=scene)
         memory["attitude_global"] = (memory["global"] if self.attitude_problem is self.problem
                                      else self.attitude_problem.global_params(scene=scene))
+        memory["fresh"] = True  # the next step copies its parameters into the batch arrays and starts cold
         return memory
 
+    def _before_batch(self, n: int) -> None:
+        if self.step.n != n:
+            self.step.resize(n)
+            self._last_cold = np.zeros(n, dtype=bool)
+            self._last_ok = np.zeros(n, dtype=bool)
+
+    def _options(self, yaw: float) -> np.ndarray:
+        """The ``options`` row of :func:`~controllers.mpc.step.build_step_function` for a reference heading."""
+        settings = self.solver.settings
+        options = np.zeros(StepOptions.size)
+        options[StepOptions.reference] = self.horizon_reference.options(yaw, False)
+        options[StepOptions.force_at_prediction] = float(self.force_at_prediction)
+        options[StepOptions.initial_damping] = settings.initial_damping
+        options[StepOptions.relative_tolerance] = settings.relative_tolerance
+        options[StepOptions.step_tolerance] = settings.step_tolerance
+        options[StepOptions.max_iterations] = settings.max_iterations
+        options[StepOptions.max_iterations_cold] = settings.max_iterations_cold
+        return options
+
     def initial_guess(self, refs: ReferenceStates) -> np.ndarray:
-        """Cold start: the reference states, flatness thrust and zero body rates."""
+        """Cold start: the reference states, flatness thrust and zero body rates (as the compiled step
+        builds it; for handing a fixed problem to a solver)."""
         N = self.problem.horizon
         Z = np.empty((POINT_SIZE, N))
         Z[PointIndex.u] = 0.0
@@ -185,39 +203,78 @@ class MPC(ControllerPolicy):
         Z[PointIndex.v_world] = refs.v_world.T
         return Z
 
-    def shifted_guess(self, Z: np.ndarray) -> np.ndarray:
-        """Warm start: the previous solution advanced by one control step, its last block repeated."""
-        k = min(self.shift, Z.shape[1] - 1)
-        return np.concatenate([Z[:, k:], np.repeat(Z[:, -1:], k, axis=1)], axis=1)
-
-    def _command(self, fields: dict[str, np.ndarray], memory: dict[str, Any], index: int) -> np.ndarray:
-        t_start = time.perf_counter()
-        p, v = fields["p_world"], fields["v_world"]
-        R = fields["R_body_to_world"]
-        cold = memory["Z"] is None
-        Z_warm = None if cold else self.shifted_guess(memory["Z"])
-        if Z_warm is not None and self.force_at_prediction:
-            p_pred, v_pred = Z_warm[PointIndex.p_world].T, Z_warm[PointIndex.v_world].T
-        else:
-            p_pred = v_pred = None
-        refs = self.horizon_reference.build(memory["reference"], float(fields["time"]), p - fields["p_error"],
-                                            memory["attitude_global"], p_pred, v_pred)
-        S = self.problem.stage_params(refs.p_world, refs.v_world, refs.R_body_to_world)
-        Z0 = self.initial_guess(refs) if cold or Z_warm is None else Z_warm
-        start = pack_point(np.zeros(4), p, R, v)  # its input slot is unused: no rate residual at stage 0
+    def _commands(self, batch: np.ndarray) -> np.ndarray:
+        t_start, cpu_start = time.perf_counter(), time.thread_time()
+        n = len(batch)
+        inputs, outputs = self.step.inputs, self.step.outputs
+        cold = inputs[StepInput.cold]
+        for i, memory in enumerate(self._memory):
+            if memory["fresh"]:
+                inputs[StepInput.global_params][i] = memory["global"]
+                inputs[StepInput.attitude_global][i] = memory["attitude_global"]
+                inputs[StepInput.options][i] = self._options(memory["reference"].yaw)
+                cold[i] = 1.0
+                memory["fresh"] = False
+        finite = np.isfinite(batch).all(axis=1)
+        if not finite.all():  # those rows are solved on zeros and then replaced by the hover fallback
+            batch = np.where(finite[:, None], batch, 0.0)
+        state = inputs[StepInput.state]
+        state[:, _STATE_P] = batch[:, _OBS_P]
+        state[:, _STATE_R] = batch[:, _OBS_R].reshape(n, 3, 3).transpose(0, 2, 1).reshape(n, 9)
+        state[:, _STATE_V] = batch[:, _OBS_V]
+        state[:, _STATE_P_REF] = batch[:, _OBS_P] - batch[:, _OBS_P_ERROR]
+        inputs[StepInput.samples][:] = sample_horizons([m["reference"] for m in self._memory], batch[:, _OBS_TIME],
+                                                       self.horizon_reference.steps)
+        self._last_cold[:] = cold[:, 0] != 0
         t_solve, cpu_solve = time.perf_counter(), time.thread_time()
-        result = self.solver.solve(Z0, start, S, memory["global"], cold=cold)
+        self._solve_batch()
         t_end, cpu_end = time.perf_counter(), time.thread_time()
-        if not (np.all(np.isfinite(result.Z)) and math.isfinite(result.cost)):
-            raise SolverFailure(f"non-finite MPC solution (cost {result.cost})")
-        memory["Z"] = result.Z
-        command = result.Z[PointIndex.u, 0].copy()
-        self.last_solves[index] = SolveRecord(Z0, start, S, memory["global"], cold, result)
-        self.solve_times.append(t_end - t_solve)
-        self.solve_cpu_times.append(cpu_end - cpu_solve)
-        self.step_times.append(t_end - t_start)
-        self.iteration_counts.append(result.iterations)
-        return command
+        Z, info = outputs[StepOutput.Z], outputs[StepOutput.info]
+        ok = finite & (info[:, LMInfo.failed] == 0) & np.isfinite(info[:, LMInfo.cost]) & np.isfinite(Z).all(axis=1)
+        commands = Z[:, :4].copy()  # u_0: the first four entries of the column-major blocks
+        inputs[StepInput.Z_previous][ok] = Z[ok]
+        cold[ok] = 0.0
+        self._last_ok = ok
+        for i in np.flatnonzero(~ok):
+            R = batch[i, _OBS_R].reshape(3, 3)
+            if not finite[i]:
+                reason = "non-finite observation"
+            elif info[i, LMInfo.failed]:
+                reason = f"SolverFailure: non-finite MPC cost {info[i, LMInfo.initial_cost]} at the initial guess"
+            else:
+                reason = f"non-finite MPC solution (cost {info[i, LMInfo.cost]})"
+            commands[i] = self._fail(int(i), R, reason)
+        t_done = time.perf_counter()
+        self.solve_times.extend([(t_end - t_solve) / n] * n)
+        self.solve_cpu_times.extend([(cpu_end - cpu_solve) / n] * n)
+        self.step_times.extend([(t_done - t_start) / n] * n)
+        self.cpu_step_times.extend([(time.thread_time() - cpu_start) / n] * n)
+        self.iteration_counts.extend(info[:, LMInfo.iterations].astype(int).tolist())
+        return commands
+
+    def _solve_batch(self) -> None:
+        """Run the compiled control step on every row of the batch arrays (one native call)."""
+        self.step()
+
+    @property
+    def last_solves(self) -> list[SolveRecord | None]:
+        """Per batch index, the latest solve (``None`` where it failed or none ran yet)."""
+        if self.step.n == 0:
+            return []
+        N = self.problem.horizon
+        inputs, outputs = self.step.inputs, self.step.outputs
+        records: list[SolveRecord | None] = []
+        for i in range(self.step.n):
+            if not self._last_ok[i]:
+                records.append(None)
+                continue
+            start = np.concatenate([np.zeros(4), inputs[StepInput.state][i, :STATE_SIZE]])
+            records.append(SolveRecord(
+                outputs[StepOutput.Z0][i].reshape(POINT_SIZE, N, order="F").copy(), start,
+                outputs[StepOutput.stage_params][i].reshape(-1, N, order="F").copy(),
+                inputs[StepInput.global_params][i].copy(), bool(self._last_cold[i]),
+                LMResult.from_outputs(outputs[StepOutput.Z][i], outputs[StepOutput.info][i])))
+        return records
 
 
 class SCMPC(MPC):

@@ -37,22 +37,29 @@ the suction into the reference at the predicted states makes that lean free and
 leaves the weights to act on the tracking error only. With stiffer weights (the
 tuned presets, ``controllers/presets``) the paper's form holds the vehicle off the
 wall by itself; ``wall-inspector compare`` flies both forms side by side.
+
+Where the work happens: the env's reference is sampled in NumPy (vectorised over a
+batch of vehicles, :func:`sample_horizons`); everything after it -- the offset, the
+model force, the flatness attitude -- is the CasADi function
+:func:`build_reference_function`, which the MPCs compile into their control step
+(:mod:`controllers.mpc.step`) and :class:`HorizonReference` evaluates on its own.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import casadi as ca
 import numpy as np
 
-from controllers.flatness import attitude_from_thrust, thrust_vector
+from controllers.flatness import attitude_from_thrust_symbolic
 from controllers.mpc.cost import MPCProblem
-from wall_env.codegen import CompiledFunction
+from wall_env.codegen import BatchedFunction
 from wall_env.references import Reference
 from wall_env.vehicle import GRAVITY
 
-__all__ = ["HorizonReference", "ReferenceStates"]
+__all__ = ["HorizonReference", "ReferenceStates", "ReferenceOptions", "build_reference_function", "sample_horizons"]
 
 
 class ReferenceStates:
@@ -68,14 +75,87 @@ class ReferenceStates:
         self.thrust = thrust
 
 
-def _mapped_force_function(problem: MPCProblem) -> ca.Function:
-    """``aero_force_horizon(p[3xN], R[9xN], v[3xN], u[4xN], global) -> F[3xN]``."""
-    N = problem.horizon
-    p, v = ca.MX.sym("p_world", 3, N), ca.MX.sym("v_world", 3, N)
-    R, u = ca.MX.sym("R_body_to_world", 9, N), ca.MX.sym("u", 4, N)
-    g = ca.MX.sym("global", problem.global_size)
-    force = problem.aero_force_function().map(N, "serial")(p, R, v, u, ca.repmat(g, 1, N))
-    return ca.Function("mpc_aero_force_horizon", [p, R, v, u, g], [force])
+class ReferenceOptions:
+    """Entries of the ``options`` input of :func:`build_reference_function`."""
+
+    yaw = 0  # rad, the reference's heading
+    max_tilt = 1  # rad
+    model_attitude = 2  # 1: flatness with the model force, 0: kinematic flatness
+    at_prediction = 3  # 1: the force at p_at, v_at; 0: on the reference
+    size = 4
+
+
+def sample_horizons(references: Sequence[Reference], times: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Position, velocity and acceleration of ``references[i]`` at ``times[i] + steps``, as
+    rows ``(n, 9 (N + 1))`` of the ``samples`` input of :func:`build_reference_function`
+    (each a column-major ``9 x (N + 1)`` matrix: p, v, a stacked, one column per time).
+
+    Rows that share a reference object are sampled in one vectorised call.
+    """
+    n, width = len(references), len(steps)
+    out = np.empty((n, width, 9))
+    groups: dict[int, list[int]] = {}
+    for i, reference in enumerate(references):
+        groups.setdefault(id(reference), []).append(i)
+    for rows in groups.values():
+        at = (times[rows][:, None] + steps).ravel()
+        p, v, a = references[rows[0]].sample(at)
+        out[rows, :, 0:3] = p.reshape(len(rows), width, 3)
+        out[rows, :, 3:6] = v.reshape(len(rows), width, 3)
+        out[rows, :, 6:9] = a.reshape(len(rows), width, 3)
+    return out.reshape(n, width * 9)
+
+
+def build_reference_function(force_problem: MPCProblem) -> ca.Function:
+    """``mpc_horizon_reference(samples[9x(N+1)], p_ref_now[3], p_at[3xN], v_at[3xN], global, options[4])
+    -> (p_ref[3xN], v_ref[3xN], R_ref[9xN], thrust[1xN])``.
+
+    ``samples``: the env's reference at ``t + k dt``, ``k = 0 .. N`` (:func:`sample_horizons`);
+    ``p_ref_now``: the observation's reference position, which anchors the horizon;
+    ``p_at``, ``v_at``: where the model force is taken if ``options[at_prediction]``;
+    ``global``: ``force_problem``'s global parameters (mass, model parameters, walls);
+    ``options`` as :class:`ReferenceOptions`. ``R_ref`` is column-major per stage.
+    """
+    N = force_problem.horizon
+    samples = ca.SX.sym("samples", 9, N + 1)
+    p_ref_now = ca.SX.sym("p_ref_now", 3)
+    p_at, v_at = ca.SX.sym("p_at", 3, N), ca.SX.sym("v_at", 3, N)
+    g = ca.SX.sym("global", force_problem.global_size)
+    options = ca.SX.sym("options", ReferenceOptions.size)
+    yaw, max_tilt = options[ReferenceOptions.yaw], options[ReferenceOptions.max_tilt]
+    model_attitude, at_prediction = options[ReferenceOptions.model_attitude], options[ReferenceOptions.at_prediction]
+    force = force_problem.aero_force_function()
+    mass = g[1]
+    offset = p_ref_now - samples[0:3, 0]
+    p_cols, v_cols, R_cols, thrusts = [], [], [], []
+    for k in range(1, N + 1):
+        p_ref, v_ref, a_ref = samples[0:3, k] + offset, samples[3:6, k], samples[6:9, k]
+        f_kinematic = mass * (a_ref + ca.DM([0.0, 0.0, GRAVITY]))
+        R_kinematic = attitude_from_thrust_symbolic(f_kinematic, yaw, max_tilt)
+        u = ca.vertcat(ca.norm_2(f_kinematic), 0.0, 0.0, 0.0)
+        p_force = ca.if_else(at_prediction, p_at[:, k - 1], p_ref)
+        v_force = ca.if_else(at_prediction, v_at[:, k - 1], v_ref)
+        f = f_kinematic - force(p_force, ca.vec(R_kinematic), v_force, u, g)
+        R_model = attitude_from_thrust_symbolic(f, yaw, max_tilt)
+        p_cols.append(p_ref)
+        v_cols.append(v_ref)
+        R_cols.append(ca.if_else(model_attitude, ca.vec(R_model), ca.vec(R_kinematic)))
+        thrusts.append(ca.if_else(model_attitude, ca.norm_2(f), ca.norm_2(f_kinematic)))
+    return ca.Function("mpc_horizon_reference", [samples, p_ref_now, p_at, v_at, g, options],
+                       [ca.horzcat(*p_cols), ca.horzcat(*v_cols), ca.horzcat(*R_cols), ca.horzcat(*thrusts)],
+                       ["samples", "p_ref_now", "p_at", "v_at", "global", "options"],
+                       ["p_ref", "v_ref", "R_ref", "thrust"])
+
+
+_REFERENCE_FUNCTIONS: dict[tuple, ca.Function] = {}
+
+
+def reference_function(force_problem: MPCProblem) -> ca.Function:
+    """:func:`build_reference_function`, built once per problem structure and process."""
+    key = force_problem.structure_key
+    if key not in _REFERENCE_FUNCTIONS:
+        _REFERENCE_FUNCTIONS[key] = build_reference_function(force_problem)
+    return _REFERENCE_FUNCTIONS[key]
 
 
 class HorizonReference:
@@ -86,6 +166,9 @@ class HorizonReference:
     ``model_attitude=False`` drops the model force from the attitude reference (pure
     kinematic flatness); it exists to measure what the model-consistent reference
     is worth, not for use.
+
+    :meth:`build` evaluates :func:`build_reference_function` for one horizon; the MPC
+    policies run the same function inside their compiled control step.
     """
 
     def __init__(self, force_problem: MPCProblem, max_tilt: float = math.radians(80.0),
@@ -94,8 +177,15 @@ class HorizonReference:
         self.max_tilt = max_tilt
         self.model_attitude = bool(model_attitude)
         N = force_problem.horizon
-        self._steps = np.arange(N + 1) * force_problem.dt
-        self._force = CompiledFunction(_mapped_force_function(force_problem))
+        self.steps = np.arange(N + 1) * force_problem.dt
+        self._function = BatchedFunction(reference_function(force_problem))
+        self._inputs = [np.zeros((1, k)) for k in self._function.nnz_in]
+        self._outputs = self._function.outputs(1)
+        self._function.bind(self._inputs, self._outputs)
+
+    def options(self, yaw: float, at_prediction: bool) -> np.ndarray:
+        """The ``options`` input of :func:`build_reference_function`."""
+        return np.array([yaw, self.max_tilt, float(self.model_attitude), float(at_prediction)])
 
     def build(self, reference: Reference, time: float, p_ref_now: np.ndarray, force_params: np.ndarray,
               p_predicted: np.ndarray | None = None, v_predicted: np.ndarray | None = None) -> ReferenceStates:
@@ -105,22 +195,15 @@ class HorizonReference:
         ``p_predicted``, ``v_predicted`` ``(N, 3)``: where the vehicle is predicted to be
         (the warm start); the model force is evaluated there if given, else on the reference.
         """
-        p, v, a = reference.sample(time + self._steps)
-        offset = p_ref_now - p[0]
-        p_ref, v_ref, a_ref = p[1:] + offset, v[1:], a[1:]
-        mass = force_params[1]
-        yaw = reference.yaw
-        f_kinematic = thrust_vector(a_ref, mass, GRAVITY)
-        R_kinematic, _ = attitude_from_thrust(f_kinematic, yaw, self.max_tilt)
-        if not self.model_attitude:
-            return ReferenceStates(p_ref, v_ref, R_kinematic, np.linalg.norm(f_kinematic, axis=1))
-        N = len(p_ref)
-        u = np.zeros((4, N))
-        u[0] = np.linalg.norm(f_kinematic, axis=1)
-        R_columns = R_kinematic.transpose(0, 2, 1).reshape(N, 9).T  # column-major per matrix
-        p_at = p_ref if p_predicted is None else p_predicted
-        v_at = v_ref if v_predicted is None else v_predicted
-        force = self._force(p_at.T, R_columns, v_at.T, u, force_params)[0].reshape(3, N, order="F").T
-        f = f_kinematic - force
-        R_ref, _ = attitude_from_thrust(f, yaw, self.max_tilt)
-        return ReferenceStates(p_ref, v_ref, R_ref, np.linalg.norm(f, axis=1))
+        N = self.force_problem.horizon
+        at_prediction = p_predicted is not None and v_predicted is not None
+        values = [sample_horizons([reference], np.array([float(time)]), self.steps)[0], p_ref_now,
+                  np.zeros(3 * N) if p_predicted is None else np.ravel(np.asarray(p_predicted).T, order="F"),
+                  np.zeros(3 * N) if v_predicted is None else np.ravel(np.asarray(v_predicted).T, order="F"),
+                  force_params, self.options(reference.yaw, at_prediction)]
+        for buffer, value in zip(self._inputs, values):
+            buffer[0] = value
+        self._function()
+        p_ref, v_ref, R_ref, thrust = (out[0].copy() for out in self._outputs)
+        return ReferenceStates(p_ref.reshape(N, 3), v_ref.reshape(N, 3),
+                               R_ref.reshape(N, 3, 3).transpose(0, 2, 1), thrust)

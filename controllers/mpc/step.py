@@ -1,0 +1,125 @@
+"""The whole MPC control step as one compiled function, evaluated for a batch of vehicles in one call.
+
+Per vehicle, :func:`build_step_function` does what :class:`~controllers.mpc.policy.MPC`
+describes (steps 1-3 of its docstring) after the env's reference has been sampled:
+
+1. the warm start: the previous solution shifted by ``shift`` blocks (its last block
+   repeated), or at a cold start the reference states with the flatness thrust and
+   zero body rates;
+2. the reference states of the horizon (:func:`~controllers.mpc.reference.build_reference_function`,
+   the model force at the warm start's predicted states) and the stage parameters;
+3. the whole Levenberg-Marquardt solve (:func:`~controllers.mpc.lm.build_solve_function`,
+   ``max_iterations_cold`` iterations at a cold start, else ``max_iterations``).
+
+:class:`CompiledStep` compiles it with the batch loop of
+:class:`wall_env.codegen.BatchedFunction` (``-O3 -fno-math-errno``), so ``predict`` on
+``n`` observations is one native call that solves the ``n`` problems one after the
+other; the single env is ``n = 1``. The generated code depends on the problem
+structures, the horizon, the shift and the unrolled iteration count only.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from controllers.mpc.cost import STAGE_PARAM_SIZE, MPCProblem, StageParamIndex
+from controllers.mpc.lm import LMSettings, solve_function
+from controllers.mpc.manifold import POINT_SIZE, STATE_SIZE, PointIndex
+from controllers.mpc.reference import ReferenceOptions, reference_function
+from wall_env.codegen import BatchedFunction
+
+__all__ = ["StepInput", "StepOutput", "StepOptions", "build_step_function", "CompiledStep"]
+
+
+class StepOptions:
+    """Entries of the ``options`` input of :func:`build_step_function`."""
+
+    reference = slice(0, ReferenceOptions.size)  # yaw, max tilt, model attitude, (at prediction: set here)
+    force_at_prediction = ReferenceOptions.size
+    initial_damping = ReferenceOptions.size + 1
+    relative_tolerance = ReferenceOptions.size + 2
+    step_tolerance = ReferenceOptions.size + 3
+    max_iterations = ReferenceOptions.size + 4
+    max_iterations_cold = ReferenceOptions.size + 5
+    size = ReferenceOptions.size + 6
+
+
+class StepInput:
+    """Input order of :func:`build_step_function`."""
+
+    Z_previous, cold, state, samples, global_params, attitude_global, options = range(7)
+
+
+class StepOutput:
+    """Output order of :func:`build_step_function`."""
+
+    Z, info, Z0, stage_params = range(4)
+
+
+def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift: int,
+                        unrolled: int) -> ca.Function:
+    """``mpc_control_step(Z_previous[19xN], cold, state[18], samples[9x(N+1)], global, attitude_global,
+    options) -> (Z[19xN], info[6], Z0[19xN], S[17xN])``.
+
+    ``state`` = ``[p_world, R_body_to_world (column-major), v_world, p_ref_now]`` from the
+    observation; ``samples`` as :func:`~controllers.mpc.reference.sample_horizons`;
+    ``global``/``attitude_global`` the global parameters of ``problem`` and of the problem
+    whose force enters the attitude reference; ``options`` as :class:`StepOptions`.
+    ``info`` as :class:`~controllers.mpc.lm.LMInfo`; ``Z0`` and ``S`` are the initial guess
+    and stage parameters the solve started from (a benchmark hands them to IPOPT).
+    """
+    N = problem.horizon
+    Z_previous = ca.MX.sym("Z_previous", POINT_SIZE, N)
+    cold = ca.MX.sym("cold")
+    state = ca.MX.sym("state", STATE_SIZE + 3)
+    samples = ca.MX.sym("samples", 9, N + 1)
+    g = ca.MX.sym("global", problem.global_size)
+    g_attitude = ca.MX.sym("attitude_global", attitude_problem.global_size)
+    options = ca.MX.sym("options", StepOptions.size)
+
+    k = min(int(shift), N - 1)
+    Z_warm = ca.horzcat(Z_previous[:, k:], ca.repmat(Z_previous[:, N - 1], 1, k))
+    at_prediction = (1 - cold) * options[StepOptions.force_at_prediction]
+    reference_options = ca.vertcat(options[ReferenceOptions.yaw], options[ReferenceOptions.max_tilt],
+                                   options[ReferenceOptions.model_attitude], at_prediction)
+    p_ref, v_ref, R_ref, thrust = reference_function(attitude_problem)(
+        samples, state[STATE_SIZE:], Z_warm[PointIndex.p_world, :], Z_warm[PointIndex.v_world, :], g_attitude,
+        reference_options)
+    flags = np.zeros((STAGE_PARAM_SIZE - StageParamIndex.terminal, N))
+    flags[StageParamIndex.terminal - StageParamIndex.terminal, N - 1] = 1.0  # terminal residual in the last stage
+    flags[StageParamIndex.rate - StageParamIndex.terminal, 1:] = 1.0  # stage 0 has no previous input
+    S = ca.vertcat(p_ref, v_ref, R_ref, ca.DM(flags))  # the rows of StageParamIndex
+    Z_cold = ca.vertcat(thrust, ca.MX.zeros(3, N), p_ref, R_ref, v_ref)
+    Z0 = ca.if_else(cold, Z_cold, Z_warm)
+    start = ca.vertcat(ca.MX.zeros(4), state[:STATE_SIZE])  # its input slot is unused
+    limit = ca.if_else(cold, options[StepOptions.max_iterations_cold], options[StepOptions.max_iterations])
+    lm_settings = ca.vertcat(options[StepOptions.initial_damping], options[StepOptions.relative_tolerance],
+                             options[StepOptions.step_tolerance], limit)
+    Z, info = solve_function(problem, unrolled)(Z0, start, S, g, lm_settings)
+    return ca.Function("mpc_control_step", [Z_previous, cold, state, samples, g, g_attitude, options],
+                       [Z, info, Z0, S],
+                       ["Z_previous", "cold", "state", "samples", "global", "attitude_global", "options"],
+                       ["Z", "info", "Z0", "S"])
+
+
+class CompiledStep:
+    """:func:`build_step_function` compiled for batches: :meth:`resize` binds arrays of ``n`` rows
+    (:attr:`inputs`, :attr:`outputs`, one row per vehicle, as :class:`StepInput`/:class:`StepOutput`),
+    :meth:`__call__` runs every row in one native call."""
+
+    def __init__(self, problem: MPCProblem, attitude_problem: MPCProblem, shift: int, settings: LMSettings):
+        self.function = BatchedFunction(build_step_function(problem, attitude_problem, shift, settings.unrolled))
+        self.inputs: list[np.ndarray] = []
+        self.outputs: list[np.ndarray] = []
+        self.n = 0
+
+    def resize(self, n: int) -> None:
+        """Fresh zero arrays for ``n`` rows (every row must be filled before a call)."""
+        self.inputs = [np.zeros((n, k)) for k in self.function.nnz_in]
+        self.outputs = self.function.outputs(n)
+        self.function.bind(self.inputs, self.outputs)
+        self.n = n
+
+    def __call__(self) -> None:
+        self.function()
