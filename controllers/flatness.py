@@ -34,7 +34,8 @@ import casadi as ca
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-__all__ = ["thrust_vector", "attitude_from_thrust", "attitude_from_thrust_symbolic", "feedforward_body_rates", "attitude_error", "level_attitude"]
+__all__ = ["thrust_vector", "attitude_from_thrust", "attitude_from_thrust_symbolic", "feedforward_body_rates",
+           "attitude_error", "level_attitude"]
 
 _E3 = np.array([0.0, 0.0, 1.0])
 

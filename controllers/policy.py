@@ -34,7 +34,6 @@ never returns a NaN action.
 from __future__ import annotations
 
 import warnings
-from abc import ABC
 from typing import Any
 
 import numpy as np
@@ -73,7 +72,7 @@ def hover_command(mass: float, R_body_to_world: np.ndarray | None, body_rate_max
     return command
 
 
-class ControllerPolicy(ABC):
+class ControllerPolicy:
     """Base class: batching, per-env memory, action mapping and the hover fallback."""
 
     name = "controller"
@@ -87,6 +86,7 @@ class ControllerPolicy(ABC):
         self.failure_log: list[str] = []
         self._memory: list[Any] = []
         self._last_time = np.zeros(0)
+        self._missing = True  # some batch slot has no memory yet
         self._env_source: Any = None
 
     @classmethod
@@ -110,16 +110,18 @@ class ControllerPolicy(ABC):
         n = batch.shape[0]
         self._resize_memory(n)
         times = batch[:, _TIME_INDEX]
-        timed = np.isfinite(times)
-        new = timed & (times < self._last_time)
+        new = times < self._last_time  # time went back: a reset (NaN compares false)
         if episode_start is not None:
             new |= np.broadcast_to(np.asarray(episode_start, dtype=bool).reshape(-1), (n,))
-        for i in np.flatnonzero(new):
-            self._memory[i] = self._episode_memory(int(i))
-        for i in range(n):
-            if self._memory[i] is None:
-                self._memory[i] = self._episode_memory(i)
-        self._last_time[timed] = times[timed]
+        if new.any():
+            for row in np.flatnonzero(new).tolist():
+                self._memory[row] = self._episode_memory(row)
+        if self._missing:
+            for i in range(n):
+                if self._memory[i] is None:
+                    self._memory[i] = self._episode_memory(i)
+            self._missing = False
+        np.copyto(self._last_time, times, where=np.isfinite(times))
         self._before_batch(n)
         commands = self._commands(batch)
         actions = self.action_mapping.to_normalised(commands).astype(np.float32)
@@ -129,6 +131,7 @@ class ControllerPolicy(ABC):
         """Forget every env's memory (the next call starts new episodes)."""
         self._memory = []
         self._last_time = np.zeros(0)
+        self._missing = True
 
     # ------------------------------------------------------------------ for subclasses
     def _command(self, fields: dict[str, np.ndarray], memory: Any, index: int) -> np.ndarray:
@@ -150,7 +153,7 @@ class ControllerPolicy(ABC):
                                  "build the controller again for it")
         return self._new_memory(scene, reference)
 
-    def _before_batch(self, n: int) -> None:  # noqa: B027 - an optional hook, empty unless overridden
+    def _before_batch(self, n: int) -> None:
         """Hook called once per :meth:`predict` with the batch size."""
 
     def _commands(self, batch: np.ndarray) -> np.ndarray:
@@ -164,6 +167,7 @@ class ControllerPolicy(ABC):
         if len(self._memory) != n:
             self._memory = [None] * n
             self._last_time = np.full(n, -np.inf)
+            self._missing = True
 
     def _safe_command(self, observation: np.ndarray, index: int) -> np.ndarray:
         fields = parse_observation(observation)

@@ -37,7 +37,7 @@ import numpy as np
 from controllers.mpc.cost import STAGE_PARAM_SIZE, MPCProblem
 from controllers.mpc.manifold import POINT_SIZE, TANGENT_SIZE, boxplus, boxplus_first_order
 from controllers.policy import SolverFailure
-from wall_env.codegen import BatchedFunction, CompiledFunction
+from wall_env.codegen import NATIVE_FLAGS, BatchedFunction, CompiledFunction
 
 __all__ = ["LMSettings", "LMResult", "LMInfo", "LevenbergMarquardt", "build_iteration_function", "build_cost_function",
            "build_solve_function", "solve_function"]
@@ -252,9 +252,9 @@ class LMSettingsIndex:
     size = 4
 
 
-def _finite(x):
-    """1 where ``x`` is finite (``inf - inf`` and ``nan - nan`` are NaN, which compares unequal to 0)."""
-    return (x - x) == 0
+def finite(x):
+    """1 where ``x`` is finite (any comparison with NaN is false)."""
+    return ca.fabs(x) < ca.inf
 
 
 def _lm_step(problem: MPCProblem, iteration: ca.Function) -> tuple[ca.Function, ca.Function]:
@@ -272,12 +272,12 @@ def _lm_step(problem: MPCProblem, iteration: ca.Function) -> tuple[ca.Function, 
     lam, nu, _, initial, iterations, accepted = (state[n_z + i] for i in range(6))
     Z_trial, c, c_trial, predicted, _, step = iteration(Z, start, S, g, lam)
     first = iterations == 0
-    failed = first * (1 - _finite(c))
-    ok = (c_trial < c) * (predicted > 0) * _finite(c_trial)
+    failed = first * (1 - finite(c))
+    ok = (c_trial < c) * (predicted > 0) * finite(c_trial)
     rho = (c - c_trial) / predicted
     converged_ok = ca.logic_or(c - c_trial <= settings[LMSettingsIndex.relative_tolerance] * c,
                                step <= settings[LMSettingsIndex.step_tolerance])
-    converged_rejected = (step <= settings[LMSettingsIndex.step_tolerance]) * _finite(c_trial)
+    converged_rejected = (step <= settings[LMSettingsIndex.step_tolerance]) * finite(c_trial)
     converged = ca.if_else(ok, converged_ok, converged_rejected)
     iterations = iterations + 1
     done = ca.logic_or(ca.logic_or(converged, iterations >= settings[LMSettingsIndex.max_iterations]), failed)
@@ -431,7 +431,7 @@ class LevenbergMarquardt:
 
     def _solver(self, unrolled: int) -> tuple[BatchedFunction, list[np.ndarray], list[np.ndarray]]:
         if unrolled not in self._solvers:
-            function = BatchedFunction(solve_function(self.problem, unrolled))
+            function = BatchedFunction(solve_function(self.problem, unrolled), NATIVE_FLAGS)
             inputs = [np.zeros((1, k)) for k in function.nnz_in]
             outputs = function.outputs(1)
             function.bind(inputs, outputs)

@@ -51,9 +51,9 @@ import numpy as np
 from controllers.env_description import EnvDescription
 from controllers.mpc.cost import InputLimits, MPCProblem, MPCWeights
 from controllers.mpc.lm import LevenbergMarquardt, LMInfo, LMResult, LMSettings
-from controllers.mpc.manifold import POINT_SIZE, STATE_SIZE, PointIndex
-from controllers.mpc.reference import HorizonReference, ReferenceStates, sample_horizons
-from controllers.mpc.step import CompiledStep, StepInput, StepOptions, StepOutput
+from controllers.mpc.manifold import POINT_SIZE, PointIndex
+from controllers.mpc.reference import HorizonReference, ReferenceStates
+from controllers.mpc.step import CompiledStep, StepInput, StepOptions, StepOutput, StepStatus
 from controllers.policy import ControllerPolicy
 from wall_env.aero import AeroModel
 from wall_env.effects import make_effect
@@ -65,10 +65,8 @@ from wall_env.vehicle import VehicleParams
 __all__ = ["MPC", "SCMPC", "SolveRecord", "PAPER_SUCTION", "COMPENSATION_MODES"]
 
 _OBS_P, _OBS_V = OBSERVATION_FIELDS["p_world"], OBSERVATION_FIELDS["v_world"]
-_OBS_R, _OBS_P_ERROR = OBSERVATION_FIELDS["R_body_to_world"], OBSERVATION_FIELDS["p_error"]
+_OBS_R = OBSERVATION_FIELDS["R_body_to_world"]
 _OBS_TIME = OBSERVATION_FIELDS["time"].start
-# the ``state`` input of the compiled step: p_world, R_body_to_world (column-major), v_world, p_ref_now
-_STATE_P, _STATE_R, _STATE_V, _STATE_P_REF = slice(0, 3), slice(3, 12), slice(12, 15), slice(15, 18)
 
 PAPER_SUCTION = {"k_s": 4.1, "d_thr": 0.132}  # the paper's flight-identified values (Sec. 4.4)
 COMPENSATION_MODES = ("dynamics", "dynamics+attitude")
@@ -215,42 +213,40 @@ class MPC(ControllerPolicy):
                 inputs[StepInput.options][i] = self._options(memory["reference"].yaw)
                 cold[i] = 1.0
                 memory["fresh"] = False
-        finite = np.isfinite(batch).all(axis=1)
-        if not finite.all():  # those rows are solved on zeros and then replaced by the hover fallback
-            batch = np.where(finite[:, None], batch, 0.0)
-        state = inputs[StepInput.state]
-        state[:, _STATE_P] = batch[:, _OBS_P]
-        state[:, _STATE_R] = batch[:, _OBS_R].reshape(n, 3, 3).transpose(0, 2, 1).reshape(n, 9)
-        state[:, _STATE_V] = batch[:, _OBS_V]
-        state[:, _STATE_P_REF] = batch[:, _OBS_P] - batch[:, _OBS_P_ERROR]
-        inputs[StepInput.samples][:] = sample_horizons([m["reference"] for m in self._memory], batch[:, _OBS_TIME],
-                                                       self.horizon_reference.steps)
-        self._last_cold[:] = cold[:, 0] != 0
+        inputs[StepInput.observation][:] = batch
+        inputs[StepInput.samples][:] = self.horizon_reference.sampler([m["reference"] for m in self._memory],
+                                                                      batch[:, _OBS_TIME])
+        self._last_cold = cold[:, 0] != 0
         t_solve, cpu_solve = time.perf_counter(), time.thread_time()
         self._solve_batch()
         t_end, cpu_end = time.perf_counter(), time.thread_time()
         Z, info = outputs[StepOutput.Z], outputs[StepOutput.info]
-        ok = finite & (info[:, LMInfo.failed] == 0) & np.isfinite(info[:, LMInfo.cost]) & np.isfinite(Z).all(axis=1)
-        commands = Z[:, :4].copy()  # u_0: the first four entries of the column-major blocks
-        inputs[StepInput.Z_previous][ok] = Z[ok]
-        cold[ok] = 0.0
+        ok = outputs[StepOutput.status][:, StepStatus.ok] != 0
         self._last_ok = ok
-        for i in np.flatnonzero(~ok):
-            R = batch[i, _OBS_R].reshape(3, 3)
-            if not finite[i]:
-                reason = "non-finite observation"
-            elif info[i, LMInfo.failed]:
-                reason = f"SolverFailure: non-finite MPC cost {info[i, LMInfo.initial_cost]} at the initial guess"
-            else:
-                reason = f"non-finite MPC solution (cost {info[i, LMInfo.cost]})"
-            commands[i] = self._fail(int(i), R, reason)
-        t_done = time.perf_counter()
+        commands = Z[:, :4]  # u_0: the first four entries of the column-major blocks
+        if ok.all():
+            inputs[StepInput.Z_previous][:] = Z
+            cold[:] = 0.0
+        else:
+            commands = commands.copy()
+            inputs[StepInput.Z_previous][ok] = Z[ok]
+            cold[ok] = 0.0
+            for row in np.flatnonzero(~ok).tolist():
+                commands[row] = self._fail(row, batch[row, _OBS_R].reshape(3, 3), self._failure_reason(row))
         self.solve_times.extend([(t_end - t_solve) / n] * n)
         self.solve_cpu_times.extend([(cpu_end - cpu_solve) / n] * n)
-        self.step_times.extend([(t_done - t_start) / n] * n)
+        self.step_times.extend([(time.perf_counter() - t_start) / n] * n)
         self.cpu_step_times.extend([(time.thread_time() - cpu_start) / n] * n)
         self.iteration_counts.extend(info[:, LMInfo.iterations].astype(int).tolist())
         return commands
+
+    def _failure_reason(self, i: int) -> str:
+        info = self.step.outputs[StepOutput.info][i]
+        if not self.step.outputs[StepOutput.status][i, StepStatus.finite_observation]:
+            return "non-finite observation"
+        if info[LMInfo.failed]:
+            return f"SolverFailure: non-finite MPC cost {info[LMInfo.initial_cost]} at the initial guess"
+        return f"non-finite MPC solution (cost {info[LMInfo.cost]})"
 
     def _solve_batch(self) -> None:
         """Run the compiled control step on every row of the batch arrays (one native call)."""
@@ -268,7 +264,9 @@ class MPC(ControllerPolicy):
             if not self._last_ok[i]:
                 records.append(None)
                 continue
-            start = np.concatenate([np.zeros(4), inputs[StepInput.state][i, :STATE_SIZE]])
+            observation = inputs[StepInput.observation][i]
+            start = np.concatenate([np.zeros(4), observation[_OBS_P],
+                                    observation[_OBS_R].reshape(3, 3).ravel(order="F"), observation[_OBS_V]])
             records.append(SolveRecord(
                 outputs[StepOutput.Z0][i].reshape(POINT_SIZE, N, order="F").copy(), start,
                 outputs[StepOutput.stage_params][i].reshape(-1, N, order="F").copy(),

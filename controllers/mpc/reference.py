@@ -39,7 +39,7 @@ tuned presets, ``controllers/presets``) the paper's form holds the vehicle off t
 wall by itself; ``wall-inspector compare`` flies both forms side by side.
 
 Where the work happens: the env's reference is sampled in NumPy (vectorised over a
-batch of vehicles, :func:`sample_horizons`); everything after it -- the offset, the
+batch of vehicles, :class:`HorizonSampler`); everything after it -- the offset, the
 model force, the flatness attitude -- is the CasADi function
 :func:`build_reference_function`, which the MPCs compile into their control step
 (:mod:`controllers.mpc.step`) and :class:`HorizonReference` evaluates on its own.
@@ -47,6 +47,7 @@ model force, the flatness attitude -- is the CasADi function
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -55,11 +56,11 @@ import numpy as np
 
 from controllers.flatness import attitude_from_thrust_symbolic
 from controllers.mpc.cost import MPCProblem
-from wall_env.codegen import BatchedFunction
+from wall_env.codegen import NATIVE_FLAGS, BatchedFunction
 from wall_env.references import Reference
 from wall_env.vehicle import GRAVITY
 
-__all__ = ["HorizonReference", "ReferenceStates", "ReferenceOptions", "build_reference_function", "sample_horizons"]
+__all__ = ["HorizonReference", "ReferenceStates", "ReferenceOptions", "build_reference_function", "HorizonSampler"]
 
 
 class ReferenceStates:
@@ -85,32 +86,78 @@ class ReferenceOptions:
     size = 4
 
 
-def sample_horizons(references: Sequence[Reference], times: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """Position, velocity and acceleration of ``references[i]`` at ``times[i] + steps``, as
-    rows ``(n, 9 (N + 1))`` of the ``samples`` input of :func:`build_reference_function`
-    (each a column-major ``9 x (N + 1)`` matrix: p, v, a stacked, one column per time).
+class HorizonSampler:
+    """Position, velocity and acceleration of a reference at ``t + k dt``, ``k = 0 .. N``, for a batch.
 
-    Rows that share a reference object are sampled in one vectorised call.
+    :meth:`__call__` returns rows ``(n, 9 (N + 1))``, the ``samples`` input of
+    :func:`build_reference_function` (each a column-major ``9 x (N + 1)`` matrix: p, v, a
+    stacked, one column per time; positions relative to the reference's origin where a
+    table is used, which the anchoring at ``p_ref_now`` makes irrelevant). A reference is
+    sampled once on the grid ``j dt`` over its whole duration (:meth:`table`), and a
+    time within ``1e-3 dt`` of the grid -- an env's observation time, which float32 rounds --
+    reads its horizon from that table; other times are sampled directly. Rows that share a
+    reference object are handled in one vectorised step.
     """
-    n, width = len(references), len(steps)
-    out = np.empty((n, width, 9))
-    groups: dict[int, list[int]] = {}
-    for i, reference in enumerate(references):
-        groups.setdefault(id(reference), []).append(i)
-    for rows in groups.values():
-        at = (times[rows][:, None] + steps).ravel()
-        p, v, a = references[rows[0]].sample(at)
-        out[rows, :, 0:3] = p.reshape(len(rows), width, 3)
-        out[rows, :, 3:6] = v.reshape(len(rows), width, 3)
-        out[rows, :, 6:9] = a.reshape(len(rows), width, 3)
-    return out.reshape(n, width * 9)
+
+    def __init__(self, dt: float, horizon: int):
+        self.dt = float(dt)
+        self.horizon = int(horizon)
+        self.steps = np.arange(self.horizon + 1) * self.dt
+        self._by_id: dict[int, tuple[Reference, np.ndarray]] = {}
+        self._by_shape: dict[Reference, np.ndarray] = {}
+
+    def table(self, reference: Reference) -> np.ndarray:
+        """``(J, 9)``: p, v, a at ``j dt`` for ``j = 0 .. J - 1``, past the reference's end.
+
+        Tables are kept per reference *shape* (the reference moved to the origin): the
+        horizon is anchored at the observation's reference position, so a translation
+        (a randomised stand-off) changes nothing, and every env of a batch shares one table.
+        """
+        entry = self._by_id.get(id(reference))
+        if entry is None or entry[0] is not reference:
+            if len(self._by_id) >= 4096:
+                self._by_id.clear()
+            shape = dataclasses.replace(reference, origin=(0.0, 0.0, 0.0))
+            table = self._by_shape.get(shape)
+            if table is None:
+                if len(self._by_shape) >= 64:
+                    self._by_shape.clear()
+                count = int(math.ceil(shape.duration / self.dt)) + self.horizon + 2
+                table = np.concatenate(shape.sample(np.arange(count) * self.dt), axis=1)
+                self._by_shape[shape] = table
+            entry = (reference, table)
+            self._by_id[id(reference)] = entry
+        return entry[1]
+
+    def __call__(self, references: Sequence[Reference], times: np.ndarray) -> np.ndarray:
+        n, width = len(references), self.horizon + 1
+        out = np.empty((n, width, 9))
+        groups: dict[int, list[int]] = {}
+        for i, reference in enumerate(references):
+            groups.setdefault(id(reference), []).append(i)
+        for members in groups.values():
+            rows = np.asarray(members)
+            reference = references[members[0]]
+            table = self.table(reference)
+            t = times[rows]
+            grid = np.rint(t / self.dt)
+            on_grid = np.abs(t / self.dt - grid) <= 1e-3
+            if on_grid.all():
+                first = np.maximum(grid, 0.0).astype(np.int64)[:, None]
+                out[rows] = table[np.minimum(first + np.arange(width), len(table) - 1)]
+                continue
+            t = np.where(np.isfinite(t), t, 0.0)  # a broken observation: any finite time will do
+            at = (t[:, None] + self.steps).ravel()
+            p, v, a = reference.sample(at)
+            out[rows] = np.concatenate([p, v, a], axis=1).reshape(len(rows), width, 9)
+        return out.reshape(n, width * 9)
 
 
 def build_reference_function(force_problem: MPCProblem) -> ca.Function:
     """``mpc_horizon_reference(samples[9x(N+1)], p_ref_now[3], p_at[3xN], v_at[3xN], global, options[4])
     -> (p_ref[3xN], v_ref[3xN], R_ref[9xN], thrust[1xN])``.
 
-    ``samples``: the env's reference at ``t + k dt``, ``k = 0 .. N`` (:func:`sample_horizons`);
+    ``samples``: the env's reference at ``t + k dt``, ``k = 0 .. N`` (:class:`HorizonSampler`);
     ``p_ref_now``: the observation's reference position, which anchors the horizon;
     ``p_at``, ``v_at``: where the model force is taken if ``options[at_prediction]``;
     ``global``: ``force_problem``'s global parameters (mass, model parameters, walls);
@@ -176,9 +223,8 @@ class HorizonReference:
         self.force_problem = force_problem
         self.max_tilt = max_tilt
         self.model_attitude = bool(model_attitude)
-        N = force_problem.horizon
-        self.steps = np.arange(N + 1) * force_problem.dt
-        self._function = BatchedFunction(reference_function(force_problem))
+        self.sampler = HorizonSampler(force_problem.dt, force_problem.horizon)
+        self._function = BatchedFunction(reference_function(force_problem), NATIVE_FLAGS)
         self._inputs = [np.zeros((1, k)) for k in self._function.nnz_in]
         self._outputs = self._function.outputs(1)
         self._function.bind(self._inputs, self._outputs)
@@ -197,7 +243,7 @@ class HorizonReference:
         """
         N = self.force_problem.horizon
         at_prediction = p_predicted is not None and v_predicted is not None
-        values = [sample_horizons([reference], np.array([float(time)]), self.steps)[0], p_ref_now,
+        values = [self.sampler([reference], np.array([float(time)]))[0], p_ref_now,
                   np.zeros(3 * N) if p_predicted is None else np.ravel(np.asarray(p_predicted).T, order="F"),
                   np.zeros(3 * N) if v_predicted is None else np.ravel(np.asarray(v_predicted).T, order="F"),
                   force_params, self.options(reference.yaw, at_prediction)]

@@ -24,12 +24,13 @@ import casadi as ca
 import numpy as np
 
 from controllers.mpc.cost import STAGE_PARAM_SIZE, MPCProblem, StageParamIndex
-from controllers.mpc.lm import LMSettings, solve_function
-from controllers.mpc.manifold import POINT_SIZE, STATE_SIZE, PointIndex
+from controllers.mpc.lm import LMInfo, LMSettings, finite, solve_function
+from controllers.mpc.manifold import POINT_SIZE, PointIndex
 from controllers.mpc.reference import ReferenceOptions, reference_function
-from wall_env.codegen import BatchedFunction
+from wall_env.codegen import NATIVE_FLAGS, BatchedFunction
+from wall_env.observation import OBSERVATION_FIELDS, OBSERVATION_SIZE
 
-__all__ = ["StepInput", "StepOutput", "StepOptions", "build_step_function", "CompiledStep"]
+__all__ = ["StepInput", "StepOutput", "StepOptions", "StepStatus", "build_step_function", "CompiledStep"]
 
 
 class StepOptions:
@@ -48,43 +49,58 @@ class StepOptions:
 class StepInput:
     """Input order of :func:`build_step_function`."""
 
-    Z_previous, cold, state, samples, global_params, attitude_global, options = range(7)
+    Z_previous, cold, observation, samples, global_params, attitude_global, options = range(7)
 
 
 class StepOutput:
     """Output order of :func:`build_step_function`."""
 
-    Z, info, Z0, stage_params = range(4)
+    Z, info, Z0, stage_params, status = range(5)
+
+
+class StepStatus:
+    """Entries of the ``status`` output of :func:`build_step_function`."""
+
+    ok = 0  # 1: a finite observation and a finite solution with a finite cost
+    finite_observation = 1
+    size = 2
 
 
 def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift: int,
                         unrolled: int) -> ca.Function:
-    """``mpc_control_step(Z_previous[19xN], cold, state[18], samples[9x(N+1)], global, attitude_global,
-    options) -> (Z[19xN], info[6], Z0[19xN], S[17xN])``.
+    """``mpc_control_step(Z_previous[19xN], cold, observation[48], samples[9x(N+1)], global, attitude_global,
+    options) -> (Z[19xN], info[6], Z0[19xN], S[17xN], status[2])``.
 
-    ``state`` = ``[p_world, R_body_to_world (column-major), v_world, p_ref_now]`` from the
-    observation; ``samples`` as :func:`~controllers.mpc.reference.sample_horizons`;
+    ``observation``: the env's observation (:mod:`wall_env.observation`), from which the
+    measured state ``x_0`` and the reference position ``p_ref_now = p_world - p_error``
+    are read; ``samples`` as :class:`~controllers.mpc.reference.HorizonSampler`;
     ``global``/``attitude_global`` the global parameters of ``problem`` and of the problem
     whose force enters the attitude reference; ``options`` as :class:`StepOptions`.
     ``info`` as :class:`~controllers.mpc.lm.LMInfo`; ``Z0`` and ``S`` are the initial guess
-    and stage parameters the solve started from (a benchmark hands them to IPOPT).
+    and stage parameters the solve started from (a benchmark hands them to IPOPT);
+    ``status`` as :class:`StepStatus`.
     """
     N = problem.horizon
     Z_previous = ca.MX.sym("Z_previous", POINT_SIZE, N)
     cold = ca.MX.sym("cold")
-    state = ca.MX.sym("state", STATE_SIZE + 3)
+    observation = ca.MX.sym("observation", OBSERVATION_SIZE)
     samples = ca.MX.sym("samples", 9, N + 1)
     g = ca.MX.sym("global", problem.global_size)
     g_attitude = ca.MX.sym("attitude_global", attitude_problem.global_size)
     options = ca.MX.sym("options", StepOptions.size)
 
+    p_world = observation[OBSERVATION_FIELDS["p_world"]]
+    # the observation holds R row by row; the blocks hold it column by column
+    R_columns = ca.vec(ca.reshape(observation[OBSERVATION_FIELDS["R_body_to_world"]], 3, 3).T)
+    x_now = ca.vertcat(p_world, R_columns, observation[OBSERVATION_FIELDS["v_world"]])
+    p_ref_now = p_world - observation[OBSERVATION_FIELDS["p_error"]]
     k = min(int(shift), N - 1)
     Z_warm = ca.horzcat(Z_previous[:, k:], ca.repmat(Z_previous[:, N - 1], 1, k))
     at_prediction = (1 - cold) * options[StepOptions.force_at_prediction]
     reference_options = ca.vertcat(options[ReferenceOptions.yaw], options[ReferenceOptions.max_tilt],
                                    options[ReferenceOptions.model_attitude], at_prediction)
     p_ref, v_ref, R_ref, thrust = reference_function(attitude_problem)(
-        samples, state[STATE_SIZE:], Z_warm[PointIndex.p_world, :], Z_warm[PointIndex.v_world, :], g_attitude,
+        samples, p_ref_now, Z_warm[PointIndex.p_world, :], Z_warm[PointIndex.v_world, :], g_attitude,
         reference_options)
     flags = np.zeros((STAGE_PARAM_SIZE - StageParamIndex.terminal, N))
     flags[StageParamIndex.terminal - StageParamIndex.terminal, N - 1] = 1.0  # terminal residual in the last stage
@@ -92,15 +108,17 @@ def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift
     S = ca.vertcat(p_ref, v_ref, R_ref, ca.DM(flags))  # the rows of StageParamIndex
     Z_cold = ca.vertcat(thrust, ca.MX.zeros(3, N), p_ref, R_ref, v_ref)
     Z0 = ca.if_else(cold, Z_cold, Z_warm)
-    start = ca.vertcat(ca.MX.zeros(4), state[:STATE_SIZE])  # its input slot is unused
+    start = ca.vertcat(ca.MX.zeros(4), x_now)  # its input slot is unused
     limit = ca.if_else(cold, options[StepOptions.max_iterations_cold], options[StepOptions.max_iterations])
     lm_settings = ca.vertcat(options[StepOptions.initial_damping], options[StepOptions.relative_tolerance],
                              options[StepOptions.step_tolerance], limit)
     Z, info = solve_function(problem, unrolled)(Z0, start, S, g, lm_settings)
-    return ca.Function("mpc_control_step", [Z_previous, cold, state, samples, g, g_attitude, options],
-                       [Z, info, Z0, S],
-                       ["Z_previous", "cold", "state", "samples", "global", "attitude_global", "options"],
-                       ["Z", "info", "Z0", "S"])
+    finite_observation = finite(ca.sum1(observation))
+    ok = finite_observation * (1 - info[LMInfo.failed]) * finite(info[LMInfo.cost] + ca.sum1(ca.sum2(Z)))
+    return ca.Function("mpc_control_step", [Z_previous, cold, observation, samples, g, g_attitude, options],
+                       [Z, info, Z0, S, ca.vertcat(ok, finite_observation)],
+                       ["Z_previous", "cold", "observation", "samples", "global", "attitude_global", "options"],
+                       ["Z", "info", "Z0", "S", "status"])
 
 
 class CompiledStep:
@@ -109,7 +127,8 @@ class CompiledStep:
     :meth:`__call__` runs every row in one native call."""
 
     def __init__(self, problem: MPCProblem, attitude_problem: MPCProblem, shift: int, settings: LMSettings):
-        self.function = BatchedFunction(build_step_function(problem, attitude_problem, shift, settings.unrolled))
+        self.function = BatchedFunction(build_step_function(problem, attitude_problem, shift, settings.unrolled),
+                                        NATIVE_FLAGS)
         self.inputs: list[np.ndarray] = []
         self.outputs: list[np.ndarray] = []
         self.n = 0
