@@ -277,8 +277,12 @@ def run(args: argparse.Namespace) -> int:
 
 def markdown(figures: dict) -> str:
     """The figures as a Markdown table (for ``wall-inspector readme``)."""
-    rows = [("SC-MPC, Levenberg-Marquardt (wall clock)", figures["lm_solve_ms"]),
-            ("SC-MPC, Levenberg-Marquardt (CPU time)", figures["lm_solve_cpu_ms"])]
+    rows = [("SC-MPC, compiled step with Levenberg-Marquardt (wall clock)", figures["lm_solve_ms"]),
+            ("SC-MPC, compiled step with Levenberg-Marquardt (CPU time)", figures["lm_solve_cpu_ms"]),
+            ("SC-MPC, whole `predict`, one env (CPU time)", figures["predict_cpu_ms"])]
+    if "batched" in figures:
+        rows.append((f"SC-MPC, whole `predict` on {figures['batched']['vehicles']} envs, per vehicle (CPU time)",
+                     figures["batched"]["predict_cpu_ms"]))
     if "ipopt_solve_ms" in figures:
         rows.append(("same problems, CasADi + IPOPT", figures["ipopt_solve_ms"]))
     lines = ["| solver | median (ms) | p99 (ms) | p99.8 (ms) | max (ms) |", "|---|---:|---:|---:|---:|"]

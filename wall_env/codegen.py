@@ -14,6 +14,7 @@ back to CasADi's own evaluator (slower, same numbers) with a warning.
 
 from __future__ import annotations
 
+import copy
 import ctypes
 import hashlib
 import os
@@ -236,6 +237,17 @@ class BatchedFunction:
     @property
     def name(self) -> str:
         return self.function.name()
+
+    def clone(self) -> BatchedFunction:
+        """Another evaluator of the same loaded library with its own work arrays and bindings, so
+        that two threads can evaluate different rows at once (native calls release the GIL)."""
+        other = copy.copy(self)
+        other._iw = (ctypes.c_longlong * len(self._iw))()
+        other._w = (ctypes.c_double * len(self._w))()
+        other._argv = (_DOUBLE_P * self.function.n_in())()
+        other._resv = (_DOUBLE_P * self.function.n_out())()
+        other._bound = None
+        return other
 
     def outputs(self, n: int) -> list[np.ndarray]:
         """Fresh output arrays for ``n`` rows."""

@@ -1,6 +1,8 @@
 """Nominal MPC and SC-MPC as Stable-Baselines3-style policies: one class, two models.
 
-Each control step, for each env of the batch:
+Each control step, for each env of the batch (all of it in one compiled call for the
+whole batch, :mod:`controllers.mpc.step`, after the env's reference has been sampled in
+NumPy; a single observation is a batch of one):
 
 1. the initial guess: the previous solution shifted by one step (its last block
    repeated), or, at an episode start, the reference states with the flatness
@@ -28,11 +30,12 @@ also puts the suction into the attitude reference at the predicted states
 horizon and compensation of a preset (:mod:`controllers.presets`): by default
 the tuned preset of the env's task.
 
-Timing: :attr:`MPC.solve_times` lists the seconds each optimisation took (LM
-only, wall clock), :attr:`MPC.solve_cpu_times` the same in CPU time of the calling
-thread (blind to other processes taking the core), :attr:`MPC.step_times` the
-seconds of the whole controller step (reference, warm start and LM),
-:attr:`MPC.iteration_counts` the LM iterations;
+Timing, one entry per vehicle and step (a batch's call divided by its size):
+:attr:`MPC.solve_times` lists the seconds of the compiled call (warm start, reference
+states and LM; wall clock), :attr:`MPC.solve_cpu_times` the same in CPU time of the
+calling thread (blind to other processes taking the core), :attr:`MPC.step_times` and
+:attr:`MPC.cpu_step_times` the controller's whole step (reference sampling, the call,
+the checks), :attr:`MPC.iteration_counts` the LM iterations;
 :meth:`MPC.clear_statistics` empties them. :attr:`MPC.last_solves` keeps, per batch
 index, the data of the latest solve (:class:`SolveRecord`), so a benchmark can hand
 the very same problem to another solver.
@@ -102,6 +105,9 @@ class MPC(ControllerPolicy):
         rather than on the reference. The two switches exist to measure what they are
         worth; the defaults are what makes SC-MPC compensate (measured there).
     attitude_model: the model whose force enters the attitude reference; default ``model``.
+    threads: threads that solve a batch's rows at once (default 1; more for throughput on
+        several cores, e.g. a base controller in training; the CPU-time statistics then
+        count the calling thread only).
     """
 
     name = "MPC"
@@ -110,7 +116,7 @@ class MPC(ControllerPolicy):
                  vehicle: VehicleParams | None = None, horizon: int = 20, dt: float = 0.01,
                  weights: MPCWeights | None = None, limits: InputLimits | None = None,
                  solver: LMSettings | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True,
-                 force_at_prediction: bool = True, attitude_model: AeroModel | None = None):
+                 force_at_prediction: bool = True, attitude_model: AeroModel | None = None, threads: int = 1):
         super().__init__(description)
         if model is not None and not isinstance(model, AeroModel):
             raise ValueError(f"model must be a wall_env.AeroModel, got {type(model).__name__}")
@@ -136,7 +142,9 @@ class MPC(ControllerPolicy):
         self.step_times: list[float] = []
         self.cpu_step_times: list[float] = []
         self.iteration_counts: list[int] = []
-        self.step = CompiledStep(self.problem, self.attitude_problem, self.shift, self.solver.settings)
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= 64:
+            raise ValueError(f"threads must be an integer in [1, 64], got {threads!r}")
+        self.step = CompiledStep(self.problem, self.attitude_problem, self.shift, self.solver.settings, int(threads))
         self._last_cold = np.zeros(0, dtype=bool)
         self._last_ok = np.zeros(0, dtype=bool)
 
