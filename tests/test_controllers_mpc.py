@@ -19,11 +19,13 @@ from controllers.mpc.cost import InputLimits, MPCProblem, MPCWeights
 from controllers.mpc.ipopt_reference import IpoptReference
 from controllers.mpc.lm import LevenbergMarquardt, LMSettings
 from controllers.mpc.manifold import POINT_SIZE, boxplus, boxplus_first_order
+from controllers.mpc.reference import HorizonSampler
 from controllers.mpc.step import StepInput, StepOutput, StepStatus
 from controllers.policy import SolverFailure
 from wall_env.effects import make_effect
 from wall_env.model_file import FlightModel
 from wall_env.observation import OBSERVATION_FIELDS
+from wall_env.references import SweepReference
 from wall_env.rotations import so3_exp, so3_log
 
 FREE_HOVER = {"standoff": 2.0, "k_s": 0.0}
@@ -200,6 +202,23 @@ def test_batched_predict_gives_the_actions_of_single_predicts():
     assert batched.failures == 0 and sum(p.failures for p in singles) == 0
     envs.close()
     single_env.close()
+
+
+def test_horizon_sampler_reads_the_reference_on_its_grid_and_samples_it_off_the_grid():
+    reference = SweepReference(origin=(0.3, 0.0, 1.5), duration=18.0, yaw=0.0)
+    moved = reference.shifted((0.05, 0.0, 0.0))  # a randomised stand-off: the same table serves it
+    sampler = HorizonSampler(0.01, 20)
+    times = np.array([0.0, np.float32(4.99), 17.95, 25.0, 5.0031, 9.0])
+    rows = sampler([reference] * 5 + [moved], times).reshape(6, 21, 9)
+    for i, t in enumerate(times):
+        on_grid = abs(t / 0.01 - round(t / 0.01)) <= 1e-3
+        at = (round(t / 0.01) * 0.01 if on_grid else t) + np.arange(21) * 0.01
+        p, v, a = (reference if i < 5 else moved).sample(at)
+        # positions only matter relative to the horizon's start (it is anchored at the observation)
+        np.testing.assert_allclose(rows[i, :, :3] - rows[i, :1, :3], p - p[:1], atol=1e-12)
+        np.testing.assert_allclose(rows[i, :, 3:6], v, atol=1e-12)
+        np.testing.assert_allclose(rows[i, :, 6:], a, atol=1e-12)
+    assert np.abs(rows[1, :, 5]).max() > 0.2  # mid-sweep: a vertical speed, not a hover
 
 
 def test_symbolic_flatness_attitude_equals_the_numpy_one():

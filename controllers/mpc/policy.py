@@ -145,7 +145,6 @@ class MPC(ControllerPolicy):
         if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= 64:
             raise ValueError(f"threads must be an integer in [1, 64], got {threads!r}")
         self.step = CompiledStep(self.problem, self.attitude_problem, self.shift, self.solver.settings, int(threads))
-        self._last_cold = np.zeros(0, dtype=bool)
         self._last_ok = np.zeros(0, dtype=bool)
 
     @classmethod
@@ -181,7 +180,6 @@ class MPC(ControllerPolicy):
     def _before_batch(self, n: int) -> None:
         if self.step.n != n:
             self.step.resize(n)
-            self._last_cold = np.zeros(n, dtype=bool)
             self._last_ok = np.zeros(n, dtype=bool)
 
     def _options(self, yaw: float) -> np.ndarray:
@@ -222,9 +220,8 @@ class MPC(ControllerPolicy):
                 cold[i] = 1.0
                 memory["fresh"] = False
         inputs[StepInput.observation][:] = batch
-        inputs[StepInput.samples][:] = self.horizon_reference.sampler([m["reference"] for m in self._memory],
-                                                                      batch[:, _OBS_TIME])
-        self._last_cold = cold[:, 0] != 0
+        self.horizon_reference.sampler([m["reference"] for m in self._memory], batch[:, _OBS_TIME],
+                                       out=inputs[StepInput.samples])
         t_solve, cpu_solve = time.perf_counter(), time.thread_time()
         self._solve_batch()
         t_end, cpu_end = time.perf_counter(), time.thread_time()
@@ -278,7 +275,7 @@ class MPC(ControllerPolicy):
             records.append(SolveRecord(
                 outputs[StepOutput.Z0][i].reshape(POINT_SIZE, N, order="F").copy(), start,
                 outputs[StepOutput.stage_params][i].reshape(-1, N, order="F").copy(),
-                inputs[StepInput.global_params][i].copy(), bool(self._last_cold[i]),
+                inputs[StepInput.global_params][i].copy(), bool(outputs[StepOutput.status][i, StepStatus.cold]),
                 LMResult.from_outputs(outputs[StepOutput.Z][i], outputs[StepOutput.info][i])))
         return records
 

@@ -50,6 +50,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -103,6 +104,7 @@ class HorizonSampler:
         self.dt = float(dt)
         self.horizon = int(horizon)
         self.steps = np.arange(self.horizon + 1) * self.dt
+        self._offsets = np.arange(self.horizon + 1)
         self._by_id: dict[int, tuple[Reference, np.ndarray]] = {}
         self._by_shape: dict[Reference, np.ndarray] = {}
 
@@ -129,28 +131,34 @@ class HorizonSampler:
             self._by_id[id(reference)] = entry
         return entry[1]
 
-    def __call__(self, references: Sequence[Reference], times: np.ndarray) -> np.ndarray:
+    def __call__(self, references: Sequence[Reference], times: np.ndarray, out: np.ndarray | None = None
+                 ) -> np.ndarray:
+        """Rows ``(n, 9 (N + 1))`` for ``references[i]`` from ``times[i]``, written into ``out`` if given."""
         n, width = len(references), self.horizon + 1
-        out = np.empty((n, width, 9))
-        groups: dict[int, list[int]] = {}
-        for i, reference in enumerate(references):
-            groups.setdefault(id(reference), []).append(i)
-        for members in groups.values():
-            rows = np.asarray(members)
-            reference = references[members[0]]
+        result = np.empty((n, width * 9)) if out is None else out
+        view = result.reshape(n, width, 9)
+        first = references[0]
+        groups: list[tuple[Reference, Any]]
+        if all(reference is first for reference in references):
+            groups = [(first, slice(None))]
+        else:
+            members: dict[int, list[int]] = {}
+            for i, reference in enumerate(references):
+                members.setdefault(id(reference), []).append(i)
+            groups = [(references[rows[0]], np.asarray(rows)) for rows in members.values()]
+        for reference, rows in groups:
             table = self.table(reference)
             t = times[rows]
-            grid = np.rint(t / self.dt)
-            on_grid = np.abs(t / self.dt - grid) <= 1e-3
-            if on_grid.all():
-                first = np.maximum(grid, 0.0).astype(np.int64)[:, None]
-                out[rows] = table[np.minimum(first + np.arange(width), len(table) - 1)]
+            steps = t / self.dt
+            grid = np.rint(steps)
+            if (np.abs(steps - grid) <= 1e-3).all():
+                view[rows] = table[np.minimum(np.maximum(grid, 0.0).astype(np.int64)[:, None] + self._offsets,
+                                              len(table) - 1)]
                 continue
             t = np.where(np.isfinite(t), t, 0.0)  # a broken observation: any finite time will do
-            at = (t[:, None] + self.steps).ravel()
-            p, v, a = reference.sample(at)
-            out[rows] = np.concatenate([p, v, a], axis=1).reshape(len(rows), width, 9)
-        return out.reshape(n, width * 9)
+            p, v, a = reference.sample((t[:, None] + self.steps).ravel())
+            view[rows] = np.concatenate([p, v, a], axis=1).reshape(-1, width, 9)
+        return result
 
 
 def build_reference_function(force_problem: MPCProblem) -> ca.Function:

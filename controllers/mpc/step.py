@@ -65,13 +65,14 @@ class StepStatus:
 
     ok = 0  # 1: a finite observation and a finite solution with a finite cost
     finite_observation = 1
-    size = 2
+    cold = 2  # the solve started cold (the ``cold`` input)
+    size = 3
 
 
 def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift: int,
                         unrolled: int) -> ca.Function:
     """``mpc_control_step(Z_previous[19xN], cold, observation[48], samples[9x(N+1)], global, attitude_global,
-    options) -> (Z[19xN], info[6], Z0[19xN], S[17xN], status[2])``.
+    options) -> (Z[19xN], info[6], Z0[19xN], S[17xN], status[3])``.
 
     ``observation``: the env's observation (:mod:`wall_env.observation`), from which the
     measured state ``x_0`` and the reference position ``p_ref_now = p_world - p_error``
@@ -118,7 +119,7 @@ def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift
     finite_observation = finite(ca.sum1(observation))
     ok = finite_observation * (1 - info[LMInfo.failed]) * finite(info[LMInfo.cost] + ca.sum1(ca.sum2(Z)))
     return ca.Function("mpc_control_step", [Z_previous, cold, observation, samples, g, g_attitude, options],
-                       [Z, info, Z0, S, ca.vertcat(ok, finite_observation)],
+                       [Z, info, Z0, S, ca.vertcat(ok, finite_observation, cold)],
                        ["Z_previous", "cold", "observation", "samples", "global", "attitude_global", "options"],
                        ["Z", "info", "Z0", "S", "status"])
 
