@@ -96,8 +96,9 @@ class HorizonSampler:
     table is used, which the anchoring at ``p_ref_now`` makes irrelevant). A reference is
     sampled once on the grid ``j dt`` over its whole duration (:meth:`table`), and a
     time within ``1e-3 dt`` of the grid -- an env's observation time, which float32 rounds --
-    reads its horizon from that table; other times are sampled directly. Rows that share a
-    reference object are handled in one vectorised step.
+    reads its horizon from that table; other times are sampled directly (row by row the same
+    whatever else is in the batch). Rows that share a reference object are handled in one
+    vectorised step.
     """
 
     def __init__(self, dt: float, horizon: int):
@@ -151,13 +152,16 @@ class HorizonSampler:
             t = times[rows]
             steps = t / self.dt
             grid = np.rint(steps)
-            if (np.abs(steps - grid) <= 1e-3).all():
-                view[rows] = table[np.minimum(np.maximum(grid, 0.0).astype(np.int64)[:, None] + self._offsets,
-                                              len(table) - 1)]
-                continue
-            t = np.where(np.isfinite(t), t, 0.0)  # a broken observation: any finite time will do
-            p, v, a = reference.sample((t[:, None] + self.steps).ravel())
-            view[rows] = np.concatenate([p, v, a], axis=1).reshape(-1, width, 9)
+            on_grid = np.abs(steps - grid) <= 1e-3
+            if not on_grid.all():  # each row on its own: the others of the batch change nothing
+                indices = np.arange(n)[rows]
+                off = indices[~on_grid]
+                t_off = np.where(np.isfinite(t[~on_grid]), t[~on_grid], 0.0)  # a broken observation: any time
+                p, v, a = reference.sample((t_off[:, None] + self.steps).ravel())
+                view[off] = np.concatenate([p, v, a], axis=1).reshape(-1, width, 9)
+                rows, grid = indices[on_grid], grid[on_grid]
+            view[rows] = table[np.minimum(np.maximum(grid, 0.0).astype(np.int64)[:, None] + self._offsets,
+                                          len(table) - 1)]
         return result
 
 
