@@ -216,7 +216,7 @@ def test_bench_mpc_command_reports_and_checks(tmp_path, capsys):
     assert code == 1  # fewer than 2000 steps can never pass
     figures = json.loads(path.read_text())
     assert figures["steps"] == 60 and figures["lm_solve_ms"]["count"] == 60
-    assert figures["predict_cpu_ms"]["count"] == 60
+    assert figures["single"]["predict_cpu_ms"]["count"] == 60
     assert figures["batched"]["vehicles"] == 3 and figures["batched"]["predict_cpu_ms"]["count"] == 5
     assert "predict CPU per vehicle, batched N=3: p99.8 <= 1.0 ms" in figures["targets"]
     assert figures["ipopt_solve_ms"]["count"] == 60
