@@ -183,24 +183,29 @@ def build_iteration_function(problem: MPCProblem) -> ca.Function:
     C_sparsity = stage.sparsity_out(3)
     D_sparsity = stage.sparsity_out(1) + stage.sparsity_out(2)
     cost_k, A, B, C, gc, gp = stage.map(N, "serial")(prev, Z, S, ca.repmat(g, 1, N))
-    zero_block = ca.MX.zeros(_B, _B)
     # D_k = Jc_k^T Jc_k + Jp_{k+1}^T Jp_{k+1};  g_k = Jc_k^T r_k + Jp_{k+1}^T r_{k+1}
     D = A + ca.horzcat(B[:, _B:], ca.MX.zeros(stage.sparsity_out(2)))
     grad = gc + ca.horzcat(gp[:, 1:], ca.MX.zeros(_B, 1))
     # off-diagonal block between blocks k-1 and k is C_k = Jp_k^T Jc_k; C_0 couples to nothing
     C = ca.horzcat(ca.MX.zeros(C_sparsity), C[:, _B:])
 
-    forward = _forward_step(D_sparsity, C_sparsity).mapaccum("block_forward_pass", N, 2)
-    L, t, W = forward(ca.DM.eye(_B), ca.DM.zeros(_B), D, C, grad, ca.repmat(lam, 1, N))
-
-    # backward pass runs k = N-1 .. 0 with W_{k+1} (W_N = 0)
-    W_next = ca.horzcat(W[:, _B:], zero_block)
-    L_rev = ca.horzcat(*reversed(ca.horzsplit(L, _B)))
-    t_rev = ca.horzcat(*reversed(ca.horzsplit(t, 1)))
-    W_rev = ca.horzcat(*reversed(ca.horzsplit(W_next, _B)))
-    backward = _backward_step().mapaccum("block_backward_pass", N, 1)
-    delta_rev = backward(ca.DM.zeros(_B), L_rev, t_rev, W_rev)
-    delta = ca.horzcat(*reversed(ca.horzsplit(delta_rev, 1)))
+    # the block elimination as one call per stage: each call reads its stage's blocks and the
+    # previous call's results where they lie, instead of slicing, reversing and concatenating
+    # the whole horizon's factors (which cost as much as the arithmetic)
+    forward = _forward_step(D_sparsity, C_sparsity)
+    backward = _backward_step()
+    L_k, t_k = ca.MX(ca.DM.eye(_B)), ca.MX(ca.DM.zeros(_B))
+    factors = []
+    for k in range(N):
+        L_k, t_k, W_k = forward(L_k, t_k, D[:, k * _B:(k + 1) * _B], C[:, k * _B:(k + 1) * _B], grad[:, k], lam)
+        factors.append((L_k, t_k, W_k))
+    deltas: list[Any] = [None] * N
+    delta_next, W_next = ca.MX(ca.DM.zeros(_B)), ca.MX.zeros(_B, _B)  # W_N = 0
+    for k in reversed(range(N)):
+        L_k, t_k, W_k = factors[k]
+        deltas[k] = delta_next = backward(delta_next, L_k, t_k, W_next)
+        W_next = W_k
+    delta = ca.horzcat(*deltas)
 
     Z_trial = _boxplus_function().map(N, "serial")(Z, delta)
     prev_trial = ca.horzcat(start, Z_trial[:, : N - 1])
