@@ -319,5 +319,13 @@ def markdown(figures: dict) -> str:
         gap = figures["cost_gap"]
         text += (f" IPOPT takes {figures['speedup_median']:.0f}x longer (median); the LM cost is within 1 % of "
                  f"IPOPT's optimum on {100 * gap['share_within_1pct']:.1f} % of the steps (largest gap {gap['max']:.1e}).")
+    text += (" The whole `predict` (observation, reference, warm start, LM, action mapping) is timed in a flight of "
+             "one env of its own (no IPOPT between the steps)")
+    if "batched" in figures:
+        b = figures["batched"]
+        text += (f" and with {b['vehicles']} envs of the batched env answered by one `predict` call per step "
+                 f"({b['steps']:,} steps, per vehicle)")
+    load = figures["machine"]["load_average_1min"]
+    text += f"; load average {load[0]:.1f} -> {load[1]:.1f} on {figures['machine']['cpus']} CPUs."
     lines.append(text + " Measured by `wall-inspector bench-mpc`.")
     return "\n".join(lines) + "\n"
