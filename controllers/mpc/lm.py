@@ -422,17 +422,30 @@ class LevenbergMarquardt:
     control step (:mod:`controllers.mpc.step`). The generated C depends on the
     model's structure, the rotor layout, the horizon and the unrolled iteration count
     only; compiled libraries are cached on disk by :mod:`wall_env.codegen`, so the
-    first construction of a structure costs some seconds of compilation and later ones
-    (also in new processes) a few milliseconds.
+    first use of a structure costs some seconds of compilation and later ones (also in
+    new processes) a few milliseconds. Nothing is compiled before it is used.
     """
 
     def __init__(self, problem: MPCProblem, settings: LMSettings | None = None):
         self.problem = problem
         self.settings = settings if settings is not None else LMSettings()
-        iteration, cost = _functions(problem)
-        self.iteration = CompiledFunction(iteration)
-        self.cost_function = CompiledFunction(cost)
+        self._iteration: CompiledFunction | None = None
+        self._cost_function: CompiledFunction | None = None
         self._solvers: dict[int, tuple[BatchedFunction, list[np.ndarray], list[np.ndarray]]] = {}
+
+    @property
+    def iteration(self) -> CompiledFunction:
+        """One iteration (:func:`build_iteration_function`) on its own, compiled at first use."""
+        if self._iteration is None:
+            self._iteration = CompiledFunction(_functions(self.problem)[0])
+        return self._iteration
+
+    @property
+    def cost_function(self) -> CompiledFunction:
+        """The cost (:func:`build_cost_function`), compiled at first use."""
+        if self._cost_function is None:
+            self._cost_function = CompiledFunction(_functions(self.problem)[1])
+        return self._cost_function
 
     def cost(self, Z: np.ndarray, start: np.ndarray, S: np.ndarray, g: np.ndarray) -> float:
         return float(self.cost_function(Z, start, S, g)[0][0])

@@ -236,10 +236,9 @@ class HorizonReference:
         self.max_tilt = max_tilt
         self.model_attitude = bool(model_attitude)
         self.sampler = HorizonSampler(force_problem.dt, force_problem.horizon)
-        self._function = BatchedFunction(reference_function(force_problem), NATIVE_FLAGS)
-        self._inputs = [np.zeros((1, k)) for k in self._function.nnz_in]
-        self._outputs = self._function.outputs(1)
-        self._function.bind(self._inputs, self._outputs)
+        self._function: BatchedFunction | None = None  # compiled at the first build()
+        self._inputs: list[np.ndarray] = []
+        self._outputs: list[np.ndarray] = []
 
     def options(self, yaw: float, at_prediction: bool) -> np.ndarray:
         """The ``options`` input of :func:`build_reference_function`."""
@@ -259,6 +258,11 @@ class HorizonReference:
                   np.zeros(3 * N) if p_predicted is None else np.ravel(np.asarray(p_predicted).T, order="F"),
                   np.zeros(3 * N) if v_predicted is None else np.ravel(np.asarray(v_predicted).T, order="F"),
                   force_params, self.options(reference.yaw, at_prediction)]
+        if self._function is None:
+            self._function = BatchedFunction(reference_function(self.force_problem), NATIVE_FLAGS)
+            self._inputs = [np.zeros((1, k)) for k in self._function.nnz_in]
+            self._outputs = self._function.outputs(1)
+            self._function.bind(self._inputs, self._outputs)
         for buffer, value in zip(self._inputs, values):
             buffer[0] = value
         self._function()
