@@ -3,6 +3,7 @@
 Per vehicle, :func:`build_step_function` does what :class:`~controllers.mpc.policy.MPC`
 describes (steps 1-3 of its docstring) after the env's reference has been sampled:
 
+0. the measured state ``x_0`` and the reference position from the observation row;
 1. the warm start: the previous solution shifted by ``shift`` blocks (its last block
    repeated), or at a cold start the reference states with the flatness thrust and
    zero body rates;
@@ -12,7 +13,8 @@ describes (steps 1-3 of its docstring) after the env's reference has been sample
    ``max_iterations_cold`` iterations at a cold start, else ``max_iterations``).
 
 :class:`CompiledStep` compiles it with the batch loop of
-:class:`wall_env.codegen.BatchedFunction` (``-O3 -fno-math-errno``), so ``predict`` on
+:class:`wall_env.codegen.BatchedFunction` (``-O3 -fno-math-errno -march=native``, the
+library keyed by the host processor), so ``predict`` on
 ``n`` observations is one native call that solves the ``n`` problems one after the
 other; the single env is ``n = 1``. The generated code depends on the problem
 structures, the horizon, the shift and the unrolled iteration count only.
