@@ -108,6 +108,10 @@ class BatchedVecEnv(VecEnv):
         value = getattr(self.vector_env.unwrapped, attr_name)
         return [value] * self._count(indices)
 
+    def scene_and_reference(self, index: int):
+        """Scene and reference of env ``index``'s current episode (controllers read them at episode starts)."""
+        return self.vector_env.unwrapped.scene_and_reference(index)
+
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         if self._count(indices) != self.num_envs:
             raise ValueError("the rows of a batched env share their attributes: set them for all envs at once")

@@ -9,8 +9,9 @@ for a residual agent when the configuration names a base controller, and in a
 :func:`make_vec_env` builds the training env: the batched env
 (:class:`~agents.batched_vec_env.BatchedVecEnv` under ``VecMonitor``, all envs stepped by
 one compiled call in this process) or a :class:`~agents.vec_env.MultiEnvSubprocVecEnv`
-(``vector="subprocess"``; residual agents always, their base controllers step one env at
-a time); with ``n_workers=0`` a ``DummyVecEnv`` (evaluation, one process).
+(``vector="subprocess"``); with ``n_workers=0`` a ``DummyVecEnv`` (evaluation, one
+process). A residual agent on the batched env is a :class:`~agents.residual.ResidualVecEnv`
+over it: one base controller predicts for the whole batch per step.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor
 
 import wall_env  # noqa: F401  (registers the WallInspector tasks)
-from agents.residual import ResidualActionWrapper, make_base_controller
+from agents.residual import ResidualActionWrapper, ResidualVecEnv, make_base_controller
 from agents.vec_env import MultiEnvSubprocVecEnv
 
 __all__ = ["env_kwargs", "make_env", "env_factory", "make_vec_env", "VECTOR_KINDS"]
@@ -71,17 +72,21 @@ def env_factory(config: dict[str, Any], randomize: bool | None = None) -> Callab
 
 def make_vec_env(config: dict[str, Any], n_envs: int, n_workers: int = 0, randomize: bool | None = None,
                  vector: str = "subprocess") -> VecEnv:
-    """``n_envs`` environments: ``vector="batched"``, the batched env in this process (not for
-    residual agents); otherwise in ``n_workers`` processes, or in this process if ``n_workers`` is 0."""
+    """``n_envs`` environments: ``vector="batched"``, the batched env in this process (residual
+    agents: wrapped in :class:`~agents.residual.ResidualVecEnv`); otherwise in ``n_workers``
+    processes, or in this process if ``n_workers`` is 0."""
     if vector not in VECTOR_KINDS:
         raise ValueError(f"vector must be one of {VECTOR_KINDS}, got {vector!r}")
     if vector == "batched":
-        if config["residual"]:
-            raise ValueError("a residual agent needs vector='subprocess': its base controller steps one env at a time")
         from agents.batched_vec_env import BatchedVecEnv
 
-        batched = BatchedVecEnv(config["env_id"], n_envs, info_keys=MONITOR_INFO_KEYS, **env_kwargs(config, randomize))
-        return VecMonitor(batched, info_keywords=MONITOR_INFO_KEYS)
+        venv: VecEnv = BatchedVecEnv(config["env_id"], n_envs, info_keys=MONITOR_INFO_KEYS,
+                                     **env_kwargs(config, randomize))
+        if config["residual"]:
+            name = config["residual"]
+            base_kwargs = dict(config["residual_base_kwargs"].get(name) or {})
+            venv = ResidualVecEnv(venv, make_base_controller(name, venv, **base_kwargs), scale=config["residual_scale"])
+        return VecMonitor(venv, info_keywords=MONITOR_INFO_KEYS)
     fns = [env_factory(config, randomize) for _ in range(n_envs)]
     if n_workers <= 0:
         return DummyVecEnv(fns)

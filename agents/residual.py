@@ -12,11 +12,12 @@ the normalised range: 3.4 N of thrust, 0.6 rad/s of body rate). An untrained age
 learn quickly.
 
 The agent observes the environment's 48 entries followed by the base action (4
-entries), so it can tell what it is correcting. Both the training wrapper
-(:class:`ResidualActionWrapper`, one base controller per environment, built inside
-the worker process) and the deployed policy (:class:`ResidualPolicy`) use
-:func:`combine` and :func:`augment_observation`, so training and deployment apply the
-same arithmetic.
+entries), so it can tell what it is correcting. The training wrappers
+(:class:`ResidualActionWrapper` around one env, one base controller per env, built
+inside the worker process; :class:`ResidualVecEnv` around the batched env, one base
+controller answering for the whole batch with one ``predict`` call per step) and the
+deployed policy (:class:`ResidualPolicy`) use :func:`combine` and
+:func:`augment_observation`, so training and deployment apply the same arithmetic.
 
 Base controllers follow the Stable-Baselines3 predict protocol:
 ``predict(obs, state=None, episode_start=None, deterministic=True) -> (action, state)``.
@@ -24,12 +25,15 @@ Base controllers follow the Stable-Baselines3 predict protocol:
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 __all__ = [
     "BASE_CONTROLLERS",
@@ -37,13 +41,14 @@ __all__ = [
     "combine",
     "augment_observation",
     "ResidualActionWrapper",
+    "ResidualVecEnv",
     "ResidualPolicy",
 ]
 
 BASE_CONTROLLERS = ("pid", "scmpc")
 
 
-def make_base_controller(name: str, env: gym.Env, **kwargs: Any):
+def make_base_controller(name: str, env: gym.Env | VecEnv, **kwargs: Any):
     """Build base controller ``name`` (``"pid"`` or ``"scmpc"``) for ``env`` with the
     :mod:`controllers` package's ``from_env`` constructors."""
     if name not in BASE_CONTROLLERS:
@@ -75,6 +80,21 @@ def augment_observation(obs: np.ndarray, base_action: np.ndarray) -> np.ndarray:
     return np.concatenate([np.asarray(obs, dtype=np.float32), np.asarray(base_action, dtype=np.float32)], axis=-1)
 
 
+def _augmented_space(inner: gym.Space) -> spaces.Box:
+    if not isinstance(inner, spaces.Box):
+        raise ValueError(f"a residual agent needs a Box observation space, got {inner}")
+    low = np.concatenate([inner.low, -np.ones(4, dtype=np.float32)])
+    high = np.concatenate([inner.high, np.ones(4, dtype=np.float32)])
+    return spaces.Box(low, high, dtype=np.float32)
+
+
+def _scale(scale: float | np.ndarray) -> np.ndarray:
+    out = np.broadcast_to(np.asarray(scale, dtype=np.float64), (4,)).copy()
+    if not np.all(out > 0):
+        raise ValueError(f"scale must be positive, got {out.tolist()}")
+    return out
+
+
 def _base_predict(base, obs, state, episode_start):
     action, state = base.predict(obs, state=state, episode_start=episode_start, deterministic=True)
     return np.asarray(action, dtype=np.float64).reshape(np.shape(obs)[:-1] + (4,)), state
@@ -97,15 +117,8 @@ class ResidualActionWrapper(gym.Wrapper):
     def __init__(self, env: gym.Env, base: Any | Callable[[gym.Env], Any], scale: float | np.ndarray = 0.2):
         super().__init__(env)
         self.base = base(env) if callable(base) and not hasattr(base, "predict") else base
-        self.scale = np.broadcast_to(np.asarray(scale, dtype=np.float64), (4,)).copy()
-        if not np.all(self.scale > 0):
-            raise ValueError(f"scale must be positive, got {self.scale.tolist()}")
-        inner = env.observation_space
-        if not isinstance(inner, spaces.Box):
-            raise ValueError(f"a residual agent needs a Box observation space, got {inner}")
-        low = np.concatenate([inner.low, -np.ones(4, dtype=np.float32)])
-        high = np.concatenate([inner.high, np.ones(4, dtype=np.float32)])
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.scale = _scale(scale)
+        self.observation_space = _augmented_space(env.observation_space)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
         self._base_state = None
         self._base_action = np.zeros(4)
@@ -129,6 +142,59 @@ class ResidualActionWrapper(gym.Wrapper):
         info["residual_correction"] = correction
         info["applied_action"] = applied
         return self._observe(obs, False), reward, terminated, truncated, info
+
+
+class ResidualVecEnv(VecEnvWrapper):
+    """A Stable-Baselines3 ``VecEnv`` whose actions are corrections to ``base``'s actions, for a whole batch.
+
+    The vector-env counterpart of :class:`ResidualActionWrapper` for the batched env
+    (:class:`~agents.batched_vec_env.BatchedVecEnv`): after each step the base controller
+    predicts for all ``n`` envs in one call (SC-MPC solves them in one compiled call), with
+    ``episode_start`` set for the envs that were just reset. Observations are augmented
+    with the base action as in the single-env wrapper.
+
+    ``base``: the base controller, or a function ``venv -> controller`` called here.
+    The ``terminal_observation`` of an env that ended an episode carries the base action
+    chosen at the step before (the env has already been reset, and asking the base
+    controller about the last state of the old episode would disturb its memory of the
+    others); it only enters PPO's value bootstrap at time-limit ends.
+    """
+
+    def __init__(self, venv: VecEnv, base: Any | Callable[[VecEnv], Any], scale: float | np.ndarray = 0.2):
+        super().__init__(venv, observation_space=_augmented_space(venv.observation_space),
+                         action_space=spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32))
+        self.base = base(venv) if callable(base) and not hasattr(base, "predict") else base
+        self.scale = _scale(scale)
+        self._base_action = np.zeros((self.num_envs, 4))
+        self.base_time_s = 0.0  # time spent in the base controller's predict
+
+    @property
+    def step_time_s(self) -> float:
+        """Seconds spent stepping: the wrapped env's own count (if it keeps one) plus the base controller's."""
+        return float(getattr(self.venv, "step_time_s", 0.0)) + self.base_time_s
+
+    def _observe(self, obs: np.ndarray, episode_start: np.ndarray) -> np.ndarray:
+        start = time.perf_counter()
+        self._base_action, _ = _base_predict(self.base, obs, None, episode_start)
+        self.base_time_s += time.perf_counter() - start
+        return augment_observation(obs, self._base_action)
+
+    def reset(self) -> np.ndarray:
+        obs = np.asarray(self.venv.reset())
+        return self._observe(obs, np.ones(self.num_envs, dtype=bool))
+
+    def step_async(self, actions: np.ndarray) -> None:
+        applied = combine(self._base_action, np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 4),
+                          self.scale)
+        self.venv.step_async(applied.astype(np.float32))
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        previous = self._base_action
+        for k in np.flatnonzero(dones):
+            if "terminal_observation" in infos[k]:
+                infos[k]["terminal_observation"] = augment_observation(infos[k]["terminal_observation"], previous[k])
+        return self._observe(np.asarray(obs), dones), rewards, dones, infos
 
 
 class ResidualPolicy:

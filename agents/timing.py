@@ -2,7 +2,8 @@
 
 :class:`TimeSplit` is a callback that times each rollout (``on_rollout_start`` to
 ``on_rollout_end``) and takes the time the vector env spent inside ``step`` from the env
-itself when it counts it (:class:`~agents.batched_vec_env.BatchedVecEnv` does); the
+itself when it counts it (:class:`~agents.batched_vec_env.BatchedVecEnv` does, and
+:class:`~agents.residual.ResidualVecEnv` adds its base controller's time); the
 remainder of the training time is the learner's updates (and callbacks such as
 evaluations). ``split()`` gives seconds and shares for the model card.
 """
@@ -17,12 +18,22 @@ from stable_baselines3.common.callbacks import BaseCallback
 __all__ = ["TimeSplit"]
 
 
+def _counting_env(env: Any) -> Any:
+    """The outermost env of a vector-env wrapper chain (``.venv`` links) that keeps ``step_time_s``
+    itself (SB3's wrappers forward attribute lookups, but refuse names found on two levels)."""
+    while env is not None:
+        if "step_time_s" in vars(env) or any("step_time_s" in vars(cls) for cls in type(env).__mro__):
+            return env
+        env = vars(env).get("venv")
+    return None
+
+
 class TimeSplit(BaseCallback):
     """Times rollouts and updates; see the module docstring."""
 
     def __init__(self, env: Any = None):
         super().__init__()
-        self.env = env  # the unwrapped vector env that counts its own step time (``step_time_s``), if any
+        self.env = _counting_env(env)  # the outermost env of the wrapper chain that counts its step time
         self.rollout_s = 0.0
         self._training_start = 0.0
         self._rollout_start = 0.0

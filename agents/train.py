@@ -97,7 +97,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                     "(default: config, 2)")
     parser.add_argument("--vector", choices=["batched", "subprocess"],
                         help="batched: all envs in one batched env in this process (default); subprocess: single envs "
-                             "in --workers processes (residual agents always)")
+                             "in --workers processes")
     parser.add_argument("--seed", type=int, help="random seed (default: config, 0)")
     parser.add_argument("--out", help="run folder for checkpoints, logs and the model card")
     parser.add_argument("--config", help="YAML configuration instead of agents/configs/<task>.yaml")
@@ -196,8 +196,9 @@ def _command(args: argparse.Namespace, config: dict[str, Any]) -> str:
 
 # ---------------------------------------------------------------------- pieces of a run
 def vector_kind(config: dict[str, Any]) -> str:
-    """The vector env a run uses: the configured one, but subprocess for residual agents."""
-    return "subprocess" if config["residual"] else config.get("vector", "batched")
+    """The vector env a run uses: the configured one (residual agents too: on the batched env
+    their base controller predicts for the whole batch in one call)."""
+    return config.get("vector", "batched")
 
 
 def policy_description(config: dict[str, Any]) -> dict[str, Any]:
@@ -377,7 +378,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                 evaluation.evaluations_length = [list(n) for n in history["ep_lengths"]]
         from agents.timing import TimeSplit
 
-        time_split = TimeSplit(venv.unwrapped if hasattr(venv, "unwrapped") else venv)
+        time_split = TimeSplit(venv)  # wrappers pass step_time_s on from the env (and a residual's base) that count it
         periodic = PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks,
                                       every_s=60.0 * float(config["checkpoint_minutes"]), on_save=on_checkpoint)
         callbacks = [time_split, evaluation, CollisionLog(), periodic]

@@ -87,8 +87,15 @@ def read_scene_and_reference(env: Any, index: int) -> tuple[Scene, Reference]:
     """The scene and reference of sub-env ``index`` of ``env`` now (after its latest reset).
 
     A randomised stand-off makes the env rebuild both at every reset; controllers
-    read them again at each episode start through this function.
+    read them again at each episode start through this function. The batched envs
+    (:class:`wall_env.vector_env.WallInspectorVectorEnv`, SB3's ``BatchedVecEnv``) answer
+    through their ``scene_and_reference(index)``.
     """
+    rows = getattr(env, "scene_and_reference", None)
+    if rows is None and hasattr(env, "unwrapped"):
+        rows = getattr(env.unwrapped, "scene_and_reference", None)
+    if callable(rows):
+        return rows(index)
     if hasattr(env, "num_envs") and hasattr(env, "get_attr"):
         try:  # Stable-Baselines3 VecEnv: get_attr(name, indices)
             return env.get_attr("scene", indices=[index])[0], env.get_attr("reference", indices=[index])[0]

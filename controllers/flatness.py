@@ -20,17 +20,22 @@ with ``h = (j - (z_body . j) z_body) / |f / m|`` for the jerk ``j`` of the thrus
 acceleration, ``omega_x = -h . y_body``, ``omega_y = h . x_body``, and
 ``omega_z = yaw_rate * (e3 . z_body)`` (Mellinger & Kumar, ICRA 2011).
 
-All functions are vectorised over a leading axis and use NumPy only.
+All functions are vectorised over a leading axis and use NumPy only, except
+:func:`attitude_from_thrust_symbolic`, the CasADi form of :func:`attitude_from_thrust`
+that the MPCs compile into their control step (a test holds the two equal, edge
+cases included).
 """
 
 from __future__ import annotations
 
 import math
 
+import casadi as ca
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-__all__ = ["thrust_vector", "attitude_from_thrust", "feedforward_body_rates", "attitude_error", "level_attitude"]
+__all__ = ["thrust_vector", "attitude_from_thrust", "attitude_from_thrust_symbolic", "feedforward_body_rates",
+           "attitude_error", "level_attitude"]
 
 _E3 = np.array([0.0, 0.0, 1.0])
 
@@ -93,6 +98,25 @@ def attitude_from_thrust(thrust_world: np.ndarray, yaw: np.ndarray | float, max_
     R[:, :, 1] = y
     R[:, :, 2] = z
     return R, z
+
+
+def attitude_from_thrust_symbolic(thrust_world, yaw, max_tilt):
+    """:func:`attitude_from_thrust` for one thrust vector in CasADi (SX or MX ``3x1``, ``yaw`` and
+    ``max_tilt`` scalars, rad): ``R_body_to_world`` as a ``3x3`` expression, the same numbers as the
+    NumPy function (down-pointing or vanishing thrust gives level, the tilt is limited)."""
+    f = thrust_world
+    norm = ca.sqrt(ca.dot(f, f))
+    usable = ca.logic_and(norm > 1e-9, f[2] > 0.0)
+    z = ca.if_else(usable, f / ca.fmax(norm, 1e-9), ca.DM(_E3))
+    cos_max, sin_max = ca.cos(max_tilt), ca.sin(max_tilt)
+    horizontal = z[:2]
+    h_norm = ca.sqrt(ca.dot(horizontal, horizontal))
+    direction = ca.if_else(h_norm > 1e-12, horizontal / ca.fmax(h_norm, 1e-12), ca.DM([1.0, 0.0]))
+    z = ca.if_else(z[2] < cos_max, ca.vertcat(direction * sin_max, cos_max), z)
+    x_c = ca.vertcat(ca.cos(yaw), ca.sin(yaw), 0.0)
+    y = ca.cross(z, x_c)
+    y = y / ca.fmax(ca.sqrt(ca.dot(y, y)), 1e-9)
+    return ca.horzcat(ca.cross(y, z), y, z)
 
 
 def feedforward_body_rates(R_des: np.ndarray, thrust_acceleration: np.ndarray, jerk_world: np.ndarray,

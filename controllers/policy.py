@@ -34,7 +34,6 @@ never returns a NaN action.
 from __future__ import annotations
 
 import warnings
-from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
@@ -73,7 +72,7 @@ def hover_command(mass: float, R_body_to_world: np.ndarray | None, body_rate_max
     return command
 
 
-class ControllerPolicy(ABC):
+class ControllerPolicy:
     """Base class: batching, per-env memory, action mapping and the hover fallback."""
 
     name = "controller"
@@ -86,7 +85,8 @@ class ControllerPolicy(ABC):
         self.failures = 0
         self.failure_log: list[str] = []
         self._memory: list[Any] = []
-        self._last_time: list[float] = []
+        self._last_time = np.zeros(0)
+        self._missing = True  # some batch slot has no memory yet
         self._env_source: Any = None
 
     @classmethod
@@ -108,30 +108,36 @@ class ControllerPolicy(ABC):
         single = obs.ndim == 1
         batch = obs.reshape(-1, OBSERVATION_SIZE)
         n = batch.shape[0]
-        starts = np.zeros(n, dtype=bool) if episode_start is None else np.broadcast_to(
-            np.asarray(episode_start, dtype=bool).reshape(-1), (n,))
         self._resize_memory(n)
+        times = batch[:, _TIME_INDEX]
+        new = times < self._last_time  # time went back: a reset (NaN compares false)
+        if episode_start is not None:
+            new |= np.broadcast_to(np.asarray(episode_start, dtype=bool).reshape(-1), (n,))
+        if new.any():
+            for row in np.flatnonzero(new).tolist():
+                self._memory[row] = self._episode_memory(row)
+        if self._missing:
+            for i in range(n):
+                if self._memory[i] is None:
+                    self._memory[i] = self._episode_memory(i)
+            self._missing = False
+        np.copyto(self._last_time, times, where=np.isfinite(times))
         self._before_batch(n)
-        actions = np.empty((n, 4), dtype=np.float32)
-        for i in range(n):
-            t = batch[i, _TIME_INDEX]
-            if starts[i] or self._memory[i] is None or (np.isfinite(t) and t < self._last_time[i]):
-                self._memory[i] = self._episode_memory(i)
-            if np.isfinite(t):
-                self._last_time[i] = t
-            command = self._safe_command(batch[i], i)
-            actions[i] = self.action_mapping.to_normalised(command)
+        commands = self._commands(batch)
+        actions = self.action_mapping.to_normalised(commands).astype(np.float32)
         return (actions[0] if single else actions), state
 
     def reset(self) -> None:
         """Forget every env's memory (the next call starts new episodes)."""
         self._memory = []
-        self._last_time = []
+        self._last_time = np.zeros(0)
+        self._missing = True
 
     # ------------------------------------------------------------------ for subclasses
-    @abstractmethod
     def _command(self, fields: dict[str, np.ndarray], memory: Any, index: int) -> np.ndarray:
-        """Physical command ``[T, wx, wy, wz]`` for one parsed observation."""
+        """Physical command ``[T, wx, wy, wz]`` for one parsed observation (subclasses implement this
+        or :meth:`_commands`)."""
+        raise NotImplementedError(f"{type(self).__name__} implements neither _command nor _commands")
 
     def _new_memory(self, scene: Scene, reference: Reference) -> dict[str, Any]:
         """Fresh per-env memory at an episode start, for that episode's scene and reference."""
@@ -147,14 +153,21 @@ class ControllerPolicy(ABC):
                                  "build the controller again for it")
         return self._new_memory(scene, reference)
 
-    def _before_batch(self, n: int) -> None:  # noqa: B027 - an optional hook, empty unless overridden
+    def _before_batch(self, n: int) -> None:
         """Hook called once per :meth:`predict` with the batch size."""
+
+    def _commands(self, batch: np.ndarray) -> np.ndarray:
+        """Physical commands ``(n, 4)`` for a batch of observations ``(n, 48)``: by default one
+        :meth:`_command` per row behind the safety net; a controller that solves the whole
+        batch at once (the MPCs) overrides this and calls :meth:`_fail` for rows that failed."""
+        return np.stack([self._safe_command(row, i) for i, row in enumerate(batch)])
 
     # ------------------------------------------------------------------ internals
     def _resize_memory(self, n: int) -> None:
         if len(self._memory) != n:
             self._memory = [None] * n
-            self._last_time = [-np.inf] * n
+            self._last_time = np.full(n, -np.inf)
+            self._missing = True
 
     def _safe_command(self, observation: np.ndarray, index: int) -> np.ndarray:
         fields = parse_observation(observation)

@@ -67,10 +67,18 @@ def test_ppo_vecnormalize_evalcallback_and_evaluate_policy_take_the_batched_env(
     eval_env.close()
 
 
-def test_residual_agents_refuse_the_batched_env():
+def test_residual_agents_run_on_the_batched_env_with_one_base_controller():
+    from agents.residual import ResidualVecEnv
+    from controllers import PID
+
     config = {**default_config(SWEEP), "residual": "pid"}
-    with pytest.raises(ValueError, match="residual agent needs vector='subprocess'"):
-        make_vec_env(config, 4, vector="batched")
+    venv = make_vec_env(config, 4, vector="batched")
+    assert isinstance(venv.venv, ResidualVecEnv) and isinstance(venv.venv.base, PID)
+    obs = venv.reset()
+    assert obs.shape == (4, 52)
+    obs, rewards, dones, _ = venv.step(np.zeros((4, 4), dtype=np.float32))
+    assert obs.shape == (4, 52) and np.all(np.isfinite(rewards)) and not dones.any()
+    venv.close()
 
 
 def test_a_controllers_predict_takes_a_batch_of_observations_from_the_batched_env():

@@ -186,3 +186,70 @@ def test_residual_agent_trains_saves_and_loads_on_pid(tmp_path, monkeypatch):
     # (its policy.json names no preset: agents saved before presets existed flew the authors' settings)
     assert built[-2:] == [("scmpc", {"preset": "paper", "k_s": 10.0, "d_thr": 0.10}),
                           ("scmpc", {"preset": "paper", "k_s": 4.1, "d_thr": 0.132})]
+
+
+def test_batched_residual_env_adds_the_correction_to_the_base_action():
+    from agents.batched_vec_env import BatchedVecEnv
+    from agents.residual import ResidualVecEnv
+
+    base = LinearBase()
+    env = ResidualVecEnv(BatchedVecEnv("WallInspector/WallHover-v0", 3), base, scale=0.2)
+    assert env.observation_space.shape == (52,)
+    env.seed(7)
+    obs = env.reset()
+    assert base.episode_starts == 1
+    expected_base, _ = LinearBase().predict(obs[:, :48])
+    np.testing.assert_allclose(obs[:, 48:], expected_base, atol=1e-6)  # the base action is observed
+    correction = np.tile(np.array([0.5, -1.0, 0.25, 1.0], dtype=np.float32), (3, 1))
+    obs2, _, dones, _ = env.step(correction)
+    assert not dones.any()
+    # the envs really flew the combined action: they report it as their previous action
+    np.testing.assert_allclose(obs2[:, OBSERVATION_FIELDS["previous_action"]],
+                               combine(expected_base, correction, 0.2), atol=1e-6)
+    env.close()
+
+
+def test_zero_correction_on_the_batched_env_flies_exactly_like_the_base():
+    from agents.batched_vec_env import BatchedVecEnv
+    from agents.residual import ResidualVecEnv
+
+    def fly(wrapped: bool):
+        venv = BatchedVecEnv("WallInspector/WallHover-v0", 3)
+        base = LinearBase()
+        env = ResidualVecEnv(venv, base, scale=0.3) if wrapped else venv
+        env.seed(4)
+        obs = env.reset()
+        positions = []
+        for _ in range(50):
+            action = np.zeros((3, 4), dtype=np.float32) if wrapped else base.predict(obs)[0]
+            obs, _, dones, _ = env.step(action)
+            positions.append(obs[:, OBSERVATION_FIELDS["p_world"]].copy())
+            if dones.any():  # the stand-in base is no real controller: compare up to the first episode end
+                break
+        env.close()
+        return np.asarray(positions)
+
+    wrapped, plain = fly(True), fly(False)
+    assert len(wrapped) > 10
+    np.testing.assert_allclose(wrapped, plain, atol=1e-9)
+
+
+def test_residual_training_env_on_the_batched_env_uses_one_scmpc_for_the_batch():
+    from agents.config import default_config
+    from agents.envs import make_vec_env
+    from agents.residual import ResidualVecEnv
+    from agents.timing import TimeSplit
+    from controllers import SCMPC
+
+    config = default_config("WallSweep-v0")
+    config["residual"] = "scmpc"
+    venv = make_vec_env(config, 3, 0, vector="batched")
+    residual = venv.venv
+    assert isinstance(residual, ResidualVecEnv) and isinstance(residual.base, SCMPC)
+    obs = venv.reset()
+    assert obs.shape == (3, 52)
+    for _ in range(20):
+        obs, _, dones, _ = venv.step(np.zeros((3, 4), dtype=np.float32))
+    assert len(residual.base.iteration_counts) == 21 * 3 and residual.base.failures == 0
+    assert TimeSplit(venv).env is residual and residual.step_time_s > residual.base_time_s > 0
+    venv.close()

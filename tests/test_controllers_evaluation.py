@@ -211,14 +211,19 @@ def test_compare_with_paper_sim_checks_the_paper_s_table_i(tmp_path):
 def test_bench_mpc_command_reports_and_checks(tmp_path, capsys):
     path = tmp_path / "bench.json"
     table = tmp_path / "bench.md"
-    code = cli_main(["bench-mpc", "--steps", "60", "--no-pin", "--json", str(path), "--markdown", str(table)])
+    code = cli_main(["bench-mpc", "--steps", "60", "--no-pin", "--batch", "3", "--batched-steps", "5",
+                     "--json", str(path), "--markdown", str(table)])
     assert code == 1  # fewer than 2000 steps can never pass
     figures = json.loads(path.read_text())
     assert figures["steps"] == 60 and figures["lm_solve_ms"]["count"] == 60
+    assert figures["single"]["predict_cpu_ms"]["count"] == 60
+    assert figures["batched"]["vehicles"] == 3 and figures["batched"]["predict_cpu_ms"]["count"] == 5
+    assert "predict CPU per vehicle, batched N=3: p99.8 <= 1.0 ms" in figures["targets"]
     assert figures["ipopt_solve_ms"]["count"] == 60
     assert figures["cost_gap"]["share_within_1pct"] == 1.0
     assert figures["targets"]["steps >= 2000"] is False
     assert "IPOPT / LM median time" in capsys.readouterr().out
     text = table.read_text()
-    assert "| SC-MPC, Levenberg-Marquardt (wall clock) |" in text and "same problems, CasADi + IPOPT" in text
+    assert "| SC-MPC, compiled step with Levenberg-Marquardt (wall clock) |" in text
+    assert "whole `predict` on 3 envs, per vehicle (CPU time)" in text and "same problems, CasADi + IPOPT" in text
     assert f"{figures['lm_solve_ms']['median']:.3f}" in text

@@ -14,14 +14,18 @@ import wall_env  # noqa: F401
 from controllers import MPC, SCMPC
 from controllers.env_description import PUBLIC_ATTRIBUTES, describe_env
 from controllers.evaluation import evaluate
+from controllers.flatness import attitude_from_thrust, attitude_from_thrust_symbolic
 from controllers.mpc.cost import InputLimits, MPCProblem, MPCWeights
 from controllers.mpc.ipopt_reference import IpoptReference
 from controllers.mpc.lm import LevenbergMarquardt, LMSettings
 from controllers.mpc.manifold import POINT_SIZE, boxplus, boxplus_first_order
+from controllers.mpc.reference import HorizonSampler
+from controllers.mpc.step import StepInput, StepOutput, StepStatus
 from controllers.policy import SolverFailure
 from wall_env.effects import make_effect
 from wall_env.model_file import FlightModel
 from wall_env.observation import OBSERVATION_FIELDS
+from wall_env.references import SweepReference
 from wall_env.rotations import so3_exp, so3_log
 
 FREE_HOVER = {"standoff": 2.0, "k_s": 0.0}
@@ -127,6 +131,108 @@ def test_warm_started_lm_reaches_ipopt_cost_in_a_few_iterations(sweep_env):
     assert max(iterations) <= 4
 
 
+def _python_lm(solver: LevenbergMarquardt, Z, start, S, g, limit: int):
+    """The documented accept/reject loop (Madsen, Nielsen & Tingleff, Sec. 3.2) in plain Python, on the
+    compiled iteration function: the oracle for the compiled, unrolled solve."""
+    settings = solver.settings
+    lam, nu, iterations, accepted = settings.initial_damping, 2.0, 0, 0
+    cost = initial = None
+    for iterations in range(1, limit + 1):
+        Z_trial, c, c_trial, predicted, _, step = (float(x[0]) if x.size == 1 else x
+                                                  for x in solver.iteration(Z, start, S, g, lam))
+        initial = c if initial is None else initial
+        cost = c
+        if np.isfinite(c_trial) and c_trial < c and predicted > 0:
+            rho = (c - c_trial) / predicted
+            Z, cost, accepted = Z_trial.reshape(Z.shape, order="F"), c_trial, accepted + 1
+            lam, nu = lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0
+            if c - c_trial <= settings.relative_tolerance * c or step <= settings.step_tolerance:
+                return Z, cost, initial, iterations, accepted, True
+        else:
+            if step <= settings.step_tolerance and np.isfinite(c_trial):
+                return Z, cost, initial, iterations, accepted, True
+            lam, nu = lam * nu, nu * 2
+    return Z, cost, initial, iterations, accepted, False
+
+
+def test_compiled_solve_follows_the_lm_algorithm_and_reaches_ipopt_on_recorded_problems(sweep_env):
+    policy = SCMPC.from_env(sweep_env)
+    ipopt = IpoptReference(policy.problem)
+    obs, _ = sweep_env.reset(seed=11)
+    records = []
+    for i in range(240):
+        action, _ = policy.predict(obs, episode_start=np.array([i == 0]))
+        if i in (0, 1, 120, 239):
+            records.append(policy.last_solves[0])
+        obs, *_ = sweep_env.step(action)
+    assert records[0].cold and not records[-1].cold
+    for record in records:
+        limit = policy.solver.settings.max_iterations_cold if record.cold else policy.solver.settings.max_iterations
+        Z, cost, initial, iterations, accepted, converged = _python_lm(
+            policy.solver, record.Z0, record.start, record.stage_params, record.global_params, limit)
+        result = record.result
+        assert (result.iterations, result.accepted, result.converged) == (iterations, accepted, converged)
+        assert result.cost == pytest.approx(cost, rel=1e-9) and result.initial_cost == pytest.approx(initial, rel=1e-9)
+        np.testing.assert_allclose(result.Z, Z, rtol=1e-8, atol=1e-10)
+        # the standalone solver runs the same compiled solve
+        alone = policy.solver.solve(record.Z0, record.start, record.stage_params, record.global_params,
+                                    cold=record.cold)
+        assert alone.cost == result.cost and alone.iterations == result.iterations
+        reference = ipopt.solve(record.Z0, record.start, record.stage_params, record.global_params)
+        assert reference.success
+        assert (result.cost - reference.cost) / reference.cost < 1e-6
+
+
+def test_batched_predict_gives_the_actions_of_single_predicts():
+    n = 4
+    envs = gym.make_vec("WallInspector/WallSweep-v0", num_envs=n, vectorization_mode="vector_entry_point",
+                        k_s=4.1, d_thr=0.132, terminate_on_collision=False)
+    batched = SCMPC.from_env(envs)
+    single_env = gym.make("WallInspector/WallSweep-v0", k_s=4.1, d_thr=0.132, terminate_on_collision=False)
+    singles = [SCMPC.from_env(single_env) for _ in range(n)]
+    obs, _ = envs.reset(seed=20)
+    assert np.ptp(obs[:, OBSERVATION_FIELDS["p_world"]], axis=0).max() > 1e-3  # the vehicles start apart
+    for step in range(60):
+        actions, _ = batched.predict(obs, episode_start=np.full(n, step == 0))
+        for i, policy in enumerate(singles):
+            action, _ = policy.predict(obs[i], episode_start=np.array([step == 0]))
+            np.testing.assert_allclose(actions[i], action, rtol=0, atol=1e-7)
+        obs, *_ = envs.step(actions)
+    assert len({tuple(a) for a in actions}) == n  # different states, different commands
+    assert batched.failures == 0 and sum(p.failures for p in singles) == 0
+    envs.close()
+    single_env.close()
+
+
+def test_horizon_sampler_reads_the_reference_on_its_grid_and_samples_it_off_the_grid():
+    reference = SweepReference(origin=(0.3, 0.0, 1.5), duration=18.0, yaw=0.0)
+    moved = reference.shifted((0.05, 0.0, 0.0))  # a randomised stand-off: the same table serves it
+    sampler = HorizonSampler(0.01, 20)
+    times = np.array([0.0, np.float32(4.99), 17.95, 25.0, 5.0031, 9.0])
+    rows = sampler([reference] * 5 + [moved], times).reshape(6, 21, 9)
+    for i, t in enumerate(times):
+        on_grid = abs(t / 0.01 - round(t / 0.01)) <= 1e-3
+        at = (round(t / 0.01) * 0.01 if on_grid else t) + np.arange(21) * 0.01
+        p, v, a = (reference if i < 5 else moved).sample(at)
+        # positions only matter relative to the horizon's start (it is anchored at the observation)
+        np.testing.assert_allclose(rows[i, :, :3] - rows[i, :1, :3], p - p[:1], atol=1e-12)
+        np.testing.assert_allclose(rows[i, :, 3:6], v, atol=1e-12)
+        np.testing.assert_allclose(rows[i, :, 6:], a, atol=1e-12)
+    assert np.abs(rows[1, :, 5]).max() > 0.2  # mid-sweep: a vertical speed, not a hover
+
+
+def test_symbolic_flatness_attitude_equals_the_numpy_one():
+    rng = np.random.default_rng(3)
+    thrusts = np.vstack([rng.normal(size=(40, 3)) * [3, 3, 2] + [0, 0, 9.81],
+                         [[0, 0, 0], [0, 0, -5], [1e-12, 0, 1], [9.0, 0.0, 0.1], [-20, 3, 1], [0, 0, 1e-10]]])
+    f, yaw, tilt = ca.SX.sym("f", 3), ca.SX.sym("yaw"), ca.SX.sym("tilt")
+    symbolic = ca.Function("att", [f, yaw, tilt], [attitude_from_thrust_symbolic(f, yaw, tilt)])
+    for psi, max_tilt in ((0.0, np.radians(80)), (0.7, np.radians(30)), (-2.5, np.pi / 2)):
+        expected, _ = attitude_from_thrust(thrusts, psi, max_tilt)
+        got = np.array([np.asarray(symbolic(t, psi, max_tilt)) for t in thrusts])
+        np.testing.assert_allclose(got, expected, atol=1e-12)
+
+
 # ====================================================================== closed loop
 @pytest.mark.parametrize("policy_class", [MPC, SCMPC])
 def test_mpc_holds_hover_in_free_space(policy_class):
@@ -197,28 +303,34 @@ def test_episode_start_clears_the_warm_start(sweep_env):
 def test_solver_failure_gives_hover_and_a_counted_warning(sweep_env, monkeypatch):
     policy = SCMPC.from_env(sweep_env)
     obs, _ = sweep_env.reset(seed=0)
+    real_solve = policy._solve_batch
 
-    def broken(*args, **kwargs):
-        raise SolverFailure("injected")
+    def broken():  # parameters that make the cost at the initial guess NaN: a real solver failure
+        policy.step.inputs[StepInput.global_params][:] = np.nan
+        real_solve()
 
-    monkeypatch.setattr(policy.solver, "solve", broken)
-    with pytest.warns(RuntimeWarning, match="injected"):
+    monkeypatch.setattr(policy, "_solve_batch", broken)
+    with pytest.warns(RuntimeWarning, match="non-finite MPC cost"):
         action, _ = policy.predict(obs, episode_start=np.array([True]))
     assert np.all(np.isfinite(action)) and action[0] == pytest.approx(0.0, abs=1e-7)
-    assert policy.failures == 1 and "injected" in policy.failure_log[0]
+    assert policy.failures == 1 and "SolverFailure" in policy.failure_log[0]
+    assert policy.last_solves == [None]
+    monkeypatch.undo()
+    policy.predict(obs)  # the failed env starts afresh with its own parameters
+    assert policy.last_solves[0].cold and policy.failures == 1
 
 
 def test_nan_solution_and_nan_state_give_hover(sweep_env, monkeypatch):
     policy = MPC.from_env(sweep_env)
     obs, _ = sweep_env.reset(seed=0)
-    real_solve = policy.solver.solve
+    real_solve = policy._solve_batch
 
-    def nan_solve(*args, **kwargs):
-        result = real_solve(*args, **kwargs)
-        result.Z[:] = np.nan
-        return result
+    def nan_solve():
+        real_solve()
+        policy.step.outputs[StepOutput.Z][:] = np.nan
+        policy.step.outputs[StepOutput.status][:, StepStatus.ok] = 0.0
 
-    monkeypatch.setattr(policy.solver, "solve", nan_solve)
+    monkeypatch.setattr(policy, "_solve_batch", nan_solve)
     with pytest.warns(RuntimeWarning, match="non-finite MPC solution"):
         action, _ = policy.predict(obs, episode_start=np.array([True]))
     assert np.all(np.isfinite(action))

@@ -14,9 +14,11 @@ back to CasADi's own evaluator (slower, same numbers) with a warning.
 
 from __future__ import annotations
 
+import copy
 import ctypes
 import hashlib
 import os
+import platform
 import shutil
 import subprocess
 import tempfile
@@ -27,7 +29,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["CompiledFunction", "BatchedFunction", "cache_dir"]
+__all__ = ["CompiledFunction", "BatchedFunction", "cache_dir", "NATIVE_FLAGS"]
 
 _LIBRARIES: dict[str, ctypes.CDLL | None] = {}
 _LOCK = threading.Lock()
@@ -61,13 +63,32 @@ def _compile(source: str, target: Path, flags: tuple[str, ...] = ("-O2",)) -> No
         src.write_text(source)
         out = Path(tmp, target.name)
         cmd = [compiler, *flags, "-shared", "-fPIC", "-o", str(out), str(src), "-lm"]
-        subprocess.run(cmd, check=True, capture_output=True)
+        try:
+            subprocess.run(cmd, check=True, capture_output=True)
+        except subprocess.CalledProcessError:
+            if "-march=native" not in flags:
+                raise
+            # a compiler that does not know the host: portable code is slower, not wrong
+            cmd.remove("-march=native")
+            subprocess.run(cmd, check=True, capture_output=True)
         os.replace(out, target)  # atomic: concurrent processes never load a half-written file
+
+
+def _host_signature() -> str:
+    """What code compiled with ``-march=native`` depends on: the processor's model and instruction sets."""
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:
+        lines = []
+    wanted = [line for line in lines if line.split(":")[0].strip() in ("model name", "flags", "Features", "CPU part")]
+    return platform.machine() + "\n" + "\n".join(dict.fromkeys(wanted))
 
 
 def _load(function: ca.Function, extra_source: str = "", flags: tuple[str, ...] = ("-O2",)) -> ctypes.CDLL | None:
     source = _generate_source(function) + extra_source
     hashed = source if flags == ("-O2",) else source + "\n/* flags: " + " ".join(flags) + " */"
+    if "-march=native" in flags:  # the library only runs on processors like this one
+        hashed += "\n/* host: " + _host_signature() + " */"
     key = hashlib.sha256(hashed.encode()).hexdigest()[:24]
     with _LOCK:
         if key in _LIBRARIES:
@@ -175,6 +196,10 @@ CASADI_SYMBOL_EXPORT int {name}_batch(casadi_int n, const casadi_real** arg, cas
 # compiler flags of batched functions: -fno-math-errno lets sqrt compile to one instruction
 # (the results are the same; only errno is no longer set)
 _BATCH_FLAGS = ("-O3", "-fno-math-errno")
+# flags for code that is as fast as the host allows (the controllers' solves): the host's
+# instruction sets (FMA, AVX) change the last bits of results, and the cached library is
+# keyed by the host's processor so that it never runs on another kind
+NATIVE_FLAGS = _BATCH_FLAGS + ("-march=native",)
 
 
 class BatchedFunction:
@@ -183,10 +208,11 @@ class BatchedFunction:
     The generated C code of ``function`` is compiled with a loop over the rows (see
     ``_BATCH_LOOP``), so one call evaluates the same code for every vehicle of a batch;
     ``n = 1`` is the single environment. Inputs and outputs are NumPy arrays of shape
-    ``(n, nnz)`` (each row a matrix in CasADi's column-major order).
+    ``(n, nnz)`` (each row a matrix in CasADi's column-major order). ``flags``: compiler
+    flags (default ``-O3 -fno-math-errno``; :data:`NATIVE_FLAGS` adds ``-march=native``).
     """
 
-    def __init__(self, function: ca.Function):
+    def __init__(self, function: ca.Function, flags: tuple[str, ...] = _BATCH_FLAGS):
         _check_dense(function)
         self.function = function
         self.nnz_in = [function.nnz_in(i) for i in range(function.n_in())]
@@ -196,7 +222,7 @@ class BatchedFunction:
             nnz_in=", ".join(map(str, self.nnz_in)) or "0", nnz_out=", ".join(map(str, self.nnz_out)) or "0",
             sz_arg=max(function.sz_arg(), 1), sz_res=max(function.sz_res(), 1),
         )
-        library = _load(function, extra, _BATCH_FLAGS)
+        library = _load(function, extra, tuple(flags))
         self.native = library is not None
         self._iw = (ctypes.c_longlong * max(function.sz_iw(), 1))()
         self._w = (ctypes.c_double * max(function.sz_w(), 1))()
@@ -211,6 +237,17 @@ class BatchedFunction:
     @property
     def name(self) -> str:
         return self.function.name()
+
+    def clone(self) -> BatchedFunction:
+        """Another evaluator of the same loaded library with its own work arrays and bindings, so
+        that two threads can evaluate different rows at once (native calls release the GIL)."""
+        other = copy.copy(self)
+        other._iw = (ctypes.c_longlong * len(self._iw))()
+        other._w = (ctypes.c_double * len(self._w))()
+        other._argv = (_DOUBLE_P * self.function.n_in())()
+        other._resv = (_DOUBLE_P * self.function.n_out())()
+        other._bound = None
+        return other
 
     def outputs(self, n: int) -> list[np.ndarray]:
         """Fresh output arrays for ``n`` rows."""

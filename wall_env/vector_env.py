@@ -89,6 +89,7 @@ class WallInspectorVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.batch = EnvBatch(self.config, self.num_envs)
+        self._configured = self.config.build()
         self._all = np.arange(self.num_envs)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
         self._seeded = False
@@ -105,6 +106,32 @@ class WallInspectorVectorEnv(VectorEnv):
     @property
     def control_dt(self) -> float:
         return self.config.control_dt
+
+    @property
+    def nominal_model(self):
+        return self.config.nominal_model
+
+    @property
+    def task(self):
+        return self.config.task
+
+    @property
+    def scene(self):
+        """The configured scene (each env's current one: :meth:`scene_and_reference`)."""
+        return self._configured[0]
+
+    @property
+    def reference(self):
+        """The configured reference (each env's current one: :meth:`scene_and_reference`)."""
+        return self._configured[1]
+
+    def scene_and_reference(self, index: int):
+        """Scene and reference of env ``index``'s current episode, as the single env rebuilds them at
+        its reset (a randomised stand-off moves both); what controllers read at episode starts."""
+        standoff = self.batch.episode_parameters.get("standoff")
+        if standoff is None:
+            return self._configured
+        return self.config.build(float(standoff[index]))
 
     @property
     def episode_parameters(self) -> dict[str, np.ndarray]:

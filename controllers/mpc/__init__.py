@@ -8,6 +8,7 @@ module                 what
 ``lm``                 compiled Levenberg-Marquardt with block-tridiagonal solves
 ``ipopt_reference``    the same problem solved by CasADi + IPOPT (tests, benchmark)
 ``reference``          reference states of the horizon (flatness with the model)
+``step``               the whole control step compiled, for a batch in one call
 ``policy``             :class:`MPC` and :class:`SCMPC`, the SB3-style policies
 =====================  ==========================================================
 """

@@ -1,6 +1,8 @@
 """Nominal MPC and SC-MPC as Stable-Baselines3-style policies: one class, two models.
 
-Each control step, for each env of the batch:
+Each control step, for each env of the batch (all of it in one compiled call for the
+whole batch, :mod:`controllers.mpc.step`, after the env's reference has been sampled in
+NumPy; a single observation is a batch of one):
 
 1. the initial guess: the previous solution shifted by one step (its last block
    repeated), or, at an episode start, the reference states with the flatness
@@ -28,11 +30,12 @@ also puts the suction into the attitude reference at the predicted states
 horizon and compensation of a preset (:mod:`controllers.presets`): by default
 the tuned preset of the env's task.
 
-Timing: :attr:`MPC.solve_times` lists the seconds each optimisation took (LM
-only, wall clock), :attr:`MPC.solve_cpu_times` the same in CPU time of the calling
-thread (blind to other processes taking the core), :attr:`MPC.step_times` the
-seconds of the whole controller step (reference, warm start and LM),
-:attr:`MPC.iteration_counts` the LM iterations;
+Timing, one entry per vehicle and step (a batch's call divided by its size):
+:attr:`MPC.solve_times` lists the seconds of the compiled call (warm start, reference
+states and LM; wall clock), :attr:`MPC.solve_cpu_times` the same in CPU time of the
+calling thread (blind to other processes taking the core), :attr:`MPC.step_times` and
+:attr:`MPC.cpu_step_times` the controller's whole step (reference sampling, the call,
+the checks), :attr:`MPC.iteration_counts` the LM iterations;
 :meth:`MPC.clear_statistics` empties them. :attr:`MPC.last_solves` keeps, per batch
 index, the data of the latest solve (:class:`SolveRecord`), so a benchmark can hand
 the very same problem to another solver.
@@ -50,17 +53,23 @@ import numpy as np
 
 from controllers.env_description import EnvDescription
 from controllers.mpc.cost import InputLimits, MPCProblem, MPCWeights
-from controllers.mpc.lm import LevenbergMarquardt, LMResult, LMSettings
+from controllers.mpc.lm import LevenbergMarquardt, LMInfo, LMResult, LMSettings
 from controllers.mpc.manifold import POINT_SIZE, PointIndex
 from controllers.mpc.reference import HorizonReference, ReferenceStates
-from controllers.policy import ControllerPolicy, SolverFailure
+from controllers.mpc.step import CompiledStep, StepInput, StepOptions, StepOutput, StepStatus
+from controllers.policy import ControllerPolicy
 from wall_env.aero import AeroModel
 from wall_env.effects import make_effect
 from wall_env.model_file import FlightModel
+from wall_env.observation import OBSERVATION_FIELDS
 from wall_env.validation import check_range
 from wall_env.vehicle import VehicleParams
 
 __all__ = ["MPC", "SCMPC", "SolveRecord", "PAPER_SUCTION", "COMPENSATION_MODES"]
+
+_OBS_P, _OBS_V = OBSERVATION_FIELDS["p_world"], OBSERVATION_FIELDS["v_world"]
+_OBS_R = OBSERVATION_FIELDS["R_body_to_world"]
+_OBS_TIME = OBSERVATION_FIELDS["time"].start
 
 PAPER_SUCTION = {"k_s": 4.1, "d_thr": 0.132}  # the paper's flight-identified values (Sec. 4.4)
 COMPENSATION_MODES = ("dynamics", "dynamics+attitude")
@@ -76,16 +85,6 @@ class SolveRecord:
     global_params: np.ndarray
     cold: bool
     result: LMResult
-
-
-def pack_point(u: np.ndarray, p_world: np.ndarray, R_body_to_world: np.ndarray, v_world: np.ndarray) -> np.ndarray:
-    """A 19-vector block (see :mod:`controllers.mpc.manifold`)."""
-    point = np.empty(POINT_SIZE)
-    point[PointIndex.u] = u
-    point[PointIndex.p_world] = p_world
-    point[PointIndex.R_body_to_world] = np.asarray(R_body_to_world).reshape(3, 3).ravel(order="F")
-    point[PointIndex.v_world] = v_world
-    return point
 
 
 class MPC(ControllerPolicy):
@@ -106,6 +105,9 @@ class MPC(ControllerPolicy):
         rather than on the reference. The two switches exist to measure what they are
         worth; the defaults are what makes SC-MPC compensate (measured there).
     attitude_model: the model whose force enters the attitude reference; default ``model``.
+    threads: threads that solve a batch's rows at once (default 1; more for throughput on
+        several cores, e.g. a base controller in training; the CPU-time statistics then
+        count the calling thread only).
     """
 
     name = "MPC"
@@ -114,7 +116,7 @@ class MPC(ControllerPolicy):
                  vehicle: VehicleParams | None = None, horizon: int = 20, dt: float = 0.01,
                  weights: MPCWeights | None = None, limits: InputLimits | None = None,
                  solver: LMSettings | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True,
-                 force_at_prediction: bool = True, attitude_model: AeroModel | None = None):
+                 force_at_prediction: bool = True, attitude_model: AeroModel | None = None, threads: int = 1):
         super().__init__(description)
         if model is not None and not isinstance(model, AeroModel):
             raise ValueError(f"model must be a wall_env.AeroModel, got {type(model).__name__}")
@@ -138,8 +140,12 @@ class MPC(ControllerPolicy):
         self.solve_times: list[float] = []
         self.solve_cpu_times: list[float] = []
         self.step_times: list[float] = []
+        self.cpu_step_times: list[float] = []
         self.iteration_counts: list[int] = []
-        self.last_solves: list[SolveRecord | None] = []
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= 64:
+            raise ValueError(f"threads must be an integer in [1, 64], got {threads!r}")
+        self.step = CompiledStep(self.problem, self.attitude_problem, self.shift, self.solver.settings, int(threads))
+        self._last_ok = np.zeros(0, dtype=bool)
 
     @classmethod
     def from_env(cls, env: Any, *, preset: str | Path | None = "tuned", **kwargs: Any) -> MPC:
@@ -159,23 +165,39 @@ class MPC(ControllerPolicy):
         self.solve_times.clear()
         self.solve_cpu_times.clear()
         self.step_times.clear()
+        self.cpu_step_times.clear()
         self.iteration_counts.clear()
 
     # ------------------------------------------------------------------ control
-    def _before_batch(self, n: int) -> None:
-        if len(self.last_solves) != n:
-            self.last_solves = [None] * n
-
     def _new_memory(self, scene, reference) -> dict[str, Any]:
         memory = super()._new_memory(scene, reference)
-        memory["Z"] = None
         memory["global"] = self.problem.global_params(scene=scene)
         memory["attitude_global"] = (memory["global"] if self.attitude_problem is self.problem
                                      else self.attitude_problem.global_params(scene=scene))
+        memory["fresh"] = True  # the next step copies its parameters into the batch arrays and starts cold
         return memory
 
+    def _before_batch(self, n: int) -> None:
+        if self.step.n != n:
+            self.step.resize(n)
+            self._last_ok = np.zeros(n, dtype=bool)
+
+    def _options(self, yaw: float) -> np.ndarray:
+        """The ``options`` row of :func:`~controllers.mpc.step.build_step_function` for a reference heading."""
+        settings = self.solver.settings
+        options = np.zeros(StepOptions.size)
+        options[StepOptions.reference] = self.horizon_reference.options(yaw, False)
+        options[StepOptions.force_at_prediction] = float(self.force_at_prediction)
+        options[StepOptions.initial_damping] = settings.initial_damping
+        options[StepOptions.relative_tolerance] = settings.relative_tolerance
+        options[StepOptions.step_tolerance] = settings.step_tolerance
+        options[StepOptions.max_iterations] = settings.max_iterations
+        options[StepOptions.max_iterations_cold] = settings.max_iterations_cold
+        return options
+
     def initial_guess(self, refs: ReferenceStates) -> np.ndarray:
-        """Cold start: the reference states, flatness thrust and zero body rates."""
+        """Cold start: the reference states, flatness thrust and zero body rates (as the compiled step
+        builds it; for handing a fixed problem to a solver)."""
         N = self.problem.horizon
         Z = np.empty((POINT_SIZE, N))
         Z[PointIndex.u] = 0.0
@@ -185,39 +207,77 @@ class MPC(ControllerPolicy):
         Z[PointIndex.v_world] = refs.v_world.T
         return Z
 
-    def shifted_guess(self, Z: np.ndarray) -> np.ndarray:
-        """Warm start: the previous solution advanced by one control step, its last block repeated."""
-        k = min(self.shift, Z.shape[1] - 1)
-        return np.concatenate([Z[:, k:], np.repeat(Z[:, -1:], k, axis=1)], axis=1)
-
-    def _command(self, fields: dict[str, np.ndarray], memory: dict[str, Any], index: int) -> np.ndarray:
-        t_start = time.perf_counter()
-        p, v = fields["p_world"], fields["v_world"]
-        R = fields["R_body_to_world"]
-        cold = memory["Z"] is None
-        Z_warm = None if cold else self.shifted_guess(memory["Z"])
-        if Z_warm is not None and self.force_at_prediction:
-            p_pred, v_pred = Z_warm[PointIndex.p_world].T, Z_warm[PointIndex.v_world].T
-        else:
-            p_pred = v_pred = None
-        refs = self.horizon_reference.build(memory["reference"], float(fields["time"]), p - fields["p_error"],
-                                            memory["attitude_global"], p_pred, v_pred)
-        S = self.problem.stage_params(refs.p_world, refs.v_world, refs.R_body_to_world)
-        Z0 = self.initial_guess(refs) if cold or Z_warm is None else Z_warm
-        start = pack_point(np.zeros(4), p, R, v)  # its input slot is unused: no rate residual at stage 0
+    def _commands(self, batch: np.ndarray) -> np.ndarray:
+        t_start, cpu_start = time.perf_counter(), time.thread_time()
+        n = len(batch)
+        inputs, outputs = self.step.inputs, self.step.outputs
+        cold = inputs[StepInput.cold]
+        for i, memory in enumerate(self._memory):
+            if memory["fresh"]:
+                inputs[StepInput.global_params][i] = memory["global"]
+                inputs[StepInput.attitude_global][i] = memory["attitude_global"]
+                inputs[StepInput.options][i] = self._options(memory["reference"].yaw)
+                cold[i] = 1.0
+                memory["fresh"] = False
+        inputs[StepInput.observation][:] = batch
+        self.horizon_reference.sampler([m["reference"] for m in self._memory], batch[:, _OBS_TIME],
+                                       out=inputs[StepInput.samples])
         t_solve, cpu_solve = time.perf_counter(), time.thread_time()
-        result = self.solver.solve(Z0, start, S, memory["global"], cold=cold)
+        self._solve_batch()
         t_end, cpu_end = time.perf_counter(), time.thread_time()
-        if not (np.all(np.isfinite(result.Z)) and math.isfinite(result.cost)):
-            raise SolverFailure(f"non-finite MPC solution (cost {result.cost})")
-        memory["Z"] = result.Z
-        command = result.Z[PointIndex.u, 0].copy()
-        self.last_solves[index] = SolveRecord(Z0, start, S, memory["global"], cold, result)
-        self.solve_times.append(t_end - t_solve)
-        self.solve_cpu_times.append(cpu_end - cpu_solve)
-        self.step_times.append(t_end - t_start)
-        self.iteration_counts.append(result.iterations)
-        return command
+        Z, info = outputs[StepOutput.Z], outputs[StepOutput.info]
+        ok = outputs[StepOutput.status][:, StepStatus.ok] != 0
+        self._last_ok = ok
+        commands = Z[:, :4]  # u_0: the first four entries of the column-major blocks
+        if ok.all():
+            inputs[StepInput.Z_previous][:] = Z
+            cold[:] = 0.0
+        else:
+            commands = commands.copy()
+            inputs[StepInput.Z_previous][ok] = Z[ok]
+            cold[ok] = 0.0
+            for row in np.flatnonzero(~ok).tolist():
+                commands[row] = self._fail(row, batch[row, _OBS_R].reshape(3, 3), self._failure_reason(row))
+        self.solve_times.extend([(t_end - t_solve) / n] * n)
+        self.solve_cpu_times.extend([(cpu_end - cpu_solve) / n] * n)
+        self.step_times.extend([(time.perf_counter() - t_start) / n] * n)
+        self.cpu_step_times.extend([(time.thread_time() - cpu_start) / n] * n)
+        self.iteration_counts.extend(info[:, LMInfo.iterations].astype(int).tolist())
+        return commands
+
+    def _failure_reason(self, i: int) -> str:
+        info = self.step.outputs[StepOutput.info][i]
+        if not self.step.outputs[StepOutput.status][i, StepStatus.finite_observation]:
+            return "non-finite observation"
+        if info[LMInfo.failed]:
+            return f"SolverFailure: non-finite MPC cost {info[LMInfo.initial_cost]} at the initial guess"
+        return f"non-finite MPC solution (cost {info[LMInfo.cost]})"
+
+    def _solve_batch(self) -> None:
+        """Run the compiled control step on every row of the batch arrays (one native call)."""
+        self.step()
+
+    @property
+    def last_solves(self) -> list[SolveRecord | None]:
+        """Per batch index, the latest solve (``None`` where it failed or none ran yet)."""
+        if self.step.n == 0:
+            return []
+        N = self.problem.horizon
+        inputs, outputs = self.step.inputs, self.step.outputs
+        records: list[SolveRecord | None] = []
+        for i in range(self.step.n):
+            if not self._last_ok[i]:
+                records.append(None)
+                continue
+            observation = inputs[StepInput.observation][i]
+            start = np.concatenate([np.zeros(4), observation[_OBS_P],
+                                    observation[_OBS_R].reshape(3, 3).ravel(order="F"), observation[_OBS_V]])
+            records.append(SolveRecord(
+                outputs[StepOutput.Z0][i].reshape(POINT_SIZE, N, order="F").copy(), start,
+                outputs[StepOutput.stage_params][i].reshape(-1, N, order="F").copy(),
+                inputs[StepInput.global_params][i].copy(), bool(outputs[StepOutput.status][i, StepStatus.cold]),
+                LMResult.from_outputs(outputs[StepOutput.Z][i], outputs[StepOutput.info][i])))
+        return records
 
 
 class SCMPC(MPC):
