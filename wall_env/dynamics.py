@@ -35,7 +35,7 @@ import casadi as ca
 import numpy as np
 
 from wall_env.aero import AeroModel, symbolic_scene
-from wall_env.codegen import BatchedFunction, CompiledFunction
+from wall_env.codegen import NATIVE_FLAGS, BatchedFunction, CompiledFunction
 from wall_env.contact import collision_shapes, contact_response
 from wall_env.effects import FlightContext
 from wall_env.rotations import quat_multiply, quat_to_rotation
@@ -231,7 +231,8 @@ class BatchSimulator:
                  substeps: int, n: int):
         key_vehicle = dataclasses.replace(vehicle, mass=1.0)
         function = build_env_step_function(key_vehicle, model.structure_key, scene_structure, control_dt, substeps)
-        self._step = BatchedFunction(function)
+        # compiled for the host CPU, as the controllers' solves are: about a tenth faster per vehicle
+        self._step = BatchedFunction(function, NATIVE_FLAGS)
         self.n = n
         self.x, self.u, self.mass, self.theta, self.scene, self.restitution = (
             np.zeros((n, size)) for size in self._step.nnz_in)
