@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import csr_matrix
 
-__all__ = ["LocalPolynomial", "window_samples"]
+__all__ = ["LocalPolynomial", "moving_average", "window_samples"]
 
 _ROWS_PER_BLOCK = 4096  # rows solved at once (bounds memory at 1 kHz)
 
@@ -39,6 +39,19 @@ def window_samples(t: np.ndarray, window_s: float, order: int) -> int:
     w = max(w, order + 3)
     w += 1 - w % 2
     return min(w, len(t) if len(t) % 2 == 1 else len(t) - 1)
+
+
+def moving_average(x: np.ndarray, size: int) -> np.ndarray:
+    """Mean over ``size`` samples around each sample along axis 0, ends padded with the end values.
+
+    The same as ``scipy.ndimage.uniform_filter1d(x, size, axis=0, mode="nearest")``, without the import
+    of ``scipy.ndimage`` (a fifth of a second).
+    """
+    x = np.asarray(x, dtype=float)
+    size = max(1, int(size))
+    padded = np.concatenate([np.repeat(x[:1], size // 2, axis=0), x, np.repeat(x[-1:], (size - 1) // 2, axis=0)])
+    sums = np.cumsum(np.concatenate([np.zeros_like(x[:1]), padded]), axis=0)
+    return (sums[size:] - sums[:-size]) / size
 
 
 def _correlate_valid(x: np.ndarray, h: np.ndarray) -> np.ndarray:
