@@ -3,8 +3,10 @@
 Timing: flies a 60 s, 100 Hz wall survey with two hidden effects (wall suction and
 extra linear drag), then times ``wall-inspector discover`` on it twice: as a fresh
 process (what a user waits for: interpreter start, imports, compile-cache lookups,
-fitting, report and plots) and inside this process (the workflow alone). The target
-is at most 5 s per minute of 100 Hz log as a command.
+fitting, report and plots) and inside this process (the same command without the
+interpreter's start and imports). The target is at most 5 s per minute of 100 Hz log as
+a command; both figures are checked against it and printed with the load average, since
+on a shared machine the figures follow the load.
 
 ``--acceptance``: flies hidden-effect logs (:mod:`discovery.hidden_effects`): every
 form of :data:`~discovery.hidden_effects.FORMS` (the library's effects and the
@@ -20,8 +22,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import io
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -161,6 +165,10 @@ def _timing(args: argparse.Namespace) -> int:
         command = [sys.executable, "-m", "wall_inspector.cli", "discover", str(log), "--out", str(Path(tmp) / "cmd"),
                    "--quiet"]
         process_times, inprocess_times = [], []
+        # the in-process figure is the work alone: the modules discover loads are imported first
+        for module in ("discovery.cli", "discovery.workflow", "discovery.report", "discovery.plots", "matplotlib.figure"):
+            importlib.import_module(module)
+        load_start = os.getloadavg()
         for i in range(args.repeats):
             start = time.perf_counter()
             subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
@@ -171,19 +179,23 @@ def _timing(args: argparse.Namespace) -> int:
             inprocess_times.append(time.perf_counter() - start)
         found = sorted(e["name"] for e in json.loads((Path(tmp) / "run0" / "report.json").read_text())["effects"])
 
-    worst = max(process_times)
+    worst, worst_inprocess = max(process_times), max(inprocess_times)
     target = TARGET_S_PER_MINUTE * args.duration / 60.0
+    load_end = os.getloadavg()
     print(f"discover on a {args.duration:g} s, 100 Hz log ({len(found)} effects found: {', '.join(found)})")
     print(f"  as a command:    {', '.join(f'{t:.2f}' for t in process_times)} s")
     print(f"  in one process:  {', '.join(f'{t:.2f}' for t in inprocess_times)} s")
-    print(f"per minute of log as a command: {60.0 * worst / args.duration:.2f} s (slowest run)")
-    print(f"target <= {TARGET_S_PER_MINUTE:g} s per minute of 100 Hz log as a command: "
-          f"{'met' if worst <= target else 'NOT met'} (slowest {worst:.2f} s for {args.duration:g} s)")
+    print(f"load average (1 min) {load_start[0]:.2f} at the start, {load_end[0]:.2f} at the end, on {os.cpu_count()} CPUs")
+    for label, slowest in (("as a command", worst), ("in one process", worst_inprocess)):
+        print(f"per minute of log {label}: {60.0 * slowest / args.duration:.2f} s (slowest run); target <= "
+              f"{TARGET_S_PER_MINUTE:g} s: {'met' if slowest <= target else 'NOT met'}")
     if args.json:
         Path(args.json).write_text(json.dumps({
             "log_duration_s": args.duration, "rate_hz": 100.0, "effects_found": found,
             "command_s": process_times, "in_process_s": inprocess_times,
             "target_s_per_minute": TARGET_S_PER_MINUTE, "target_met": worst <= target,
+            "in_process_target_met": worst_inprocess <= target,
+            "load_average_start": list(load_start), "load_average_end": list(load_end), "cpus": os.cpu_count(),
         }, indent=2))
         print(f"wrote {args.json}")
     return 0
