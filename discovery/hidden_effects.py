@@ -121,8 +121,10 @@ def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int,
     flown = sorted(e["name"] for e in effects)
     named = sorted(found.names_)
     errors: dict[str, float | None] = {}
+    sigmas: dict[str, float | None] = {}  # the error in the fit's own standard errors (largest entry)
     for e in effects:
         fitted = next((f for f in found.effects_ if f.name == e["name"]), None)
+        stds = next((std for f, std in zip(found.effects_, found.param_std_) if f.name == e["name"]), {})
         for key, true in e["params"].items():
             if isinstance(true, bool):
                 continue
@@ -131,6 +133,11 @@ def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int,
                 errors[f"{e['name']}.{key}"] = None
                 continue
             got = np.atleast_1d(fitted.values[key])
+            std = np.atleast_1d(np.asarray(stds.get(key, np.nan), dtype=float))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                sigma = np.abs(got - truth) / std
+            finite = np.isfinite(sigma)  # entries left at their null value have no standard error
+            sigmas[f"{e['name']}.{key}"] = float(np.max(sigma[finite])) if finite.any() else None
             big = np.abs(truth) > 1e-9
             if key == "w":  # a wind vector: error relative to the wind speed
                 errors[f"{e['name']}.{key}"] = float(np.linalg.norm(got - truth) / np.linalg.norm(truth))
@@ -142,7 +149,7 @@ def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int,
     before, after = found.gap_before_["force_rms_N"], found.gap_after_["force_rms_N"]
     return {"flown": effects, "ended_early": False, "named": named, "named_right": named == flown, "form_right": forms_right,
             "spurious": sorted(set(named) - set(flown)), "missed": sorted(set(flown) - set(named)),
-            "param_errors": errors, "gap_reduction": 1.0 - after / before if before else None,
+            "param_errors": errors, "param_errors_in_std": sigmas, "gap_reduction": 1.0 - after / before if before else None,
             "gap_before_N": before, "gap_after_N": after, "rate_hz": rate_hz, "seed": seed,
             "samples": log.n_samples, "collisions": summary["collisions"], "runtime_s": runtime,
             "undetermined": [f"{c['effect']}.{c['parameter']}" for c in found.undetermined_],
