@@ -126,7 +126,7 @@ def _acceptance(args: argparse.Namespace) -> int:
     gaps = [r["gap_reduction"] for r in hidden]
     # misses of 10 %, told apart by the fit's own standard errors: within 2 the log does not
     # determine the parameter to 10 % (noise), beyond 2 the estimate is off by more than its noise
-    off = [(r["case"], k, e, r.get("param_errors_in_std", {}).get(k)) for r in right
+    off = [(r["case"], k, e, r.get("param_errors_in_std", {}).get(k), r.get("forms_left_open", [])) for r in right
            for k, e in r["param_errors"].items() if e is None or e > 0.10]
     off_noise = [o for o in off if o[3] is not None and o[3] <= 2.0]
     summary = {
@@ -138,8 +138,8 @@ def _acceptance(args: argparse.Namespace) -> int:
         "logs_with_all_params_within_10_percent": len(within),
         "worst_param_error": max(param_errors, default=None),
         "median_param_error": float(np.median(param_errors)) if param_errors else None,
-        "params_off_by_more_than_10_percent": [{"case": c, "param": k, "error": e, "error_in_std": z}
-                                              for c, k, e, z in off],
+        "params_off_by_more_than_10_percent": [{"case": c, "param": k, "error": e, "error_in_std": z,
+                                               "forms_left_open": f} for c, k, e, z, f in off],
         "params_off_within_2_std": len(off_noise),
         "worst_force_gap_reduction": min(gaps, default=None),
         "logs_with_gap_reduction_80_percent": sum(g >= 0.8 for g in gaps),
@@ -152,10 +152,11 @@ def _acceptance(args: argparse.Namespace) -> int:
           f"{summary['forms_right']}/{len(right)}")
     print(f"all parameters within 10 %: {len(within)}/{len(right)} logs named right; worst parameter error "
           f"{100 * (summary['worst_param_error'] or 0):.1f} %, median {100 * (summary['median_param_error'] or 0):.1f} %")
-    for case, key, error, z in off:
+    for case, key, error, z, forms in off:
         print(f"  off by more than 10 %: {case}: {key} "
               f"{'missing' if error is None else f'{100 * error:.1f} %'}"
-              f"{'' if z is None else f', {z:.1f} standard errors'}")
+              f"{'' if z is None else f', {z:.1f} standard errors'}"
+              f"{f' (the report names {forms} as left open, with the manoeuvre)' if forms else ''}")
     if off:
         print(f"  of these, {len(off_noise)} within 2 standard errors of the truth (the log does not determine them "
               f"to 10 %), {len(off) - len(off_noise)} farther or missing")

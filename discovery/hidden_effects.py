@@ -153,6 +153,7 @@ def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int,
             "gap_before_N": before, "gap_after_N": after, "rate_hz": rate_hz, "seed": seed,
             "samples": log.n_samples, "collisions": summary["collisions"], "runtime_s": runtime,
             "undetermined": [f"{c['effect']}.{c['parameter']}" for c in found.undetermined_],
+            "forms_left_open": [limit["effects"][0] for limit in found.limits_ if "[" in limit["effects"][0]],
             "alike": [f"{a['chosen']}~{a['alike']}" for a in found.selection_.alike] if found.selection_ else []}
 
 

@@ -202,6 +202,7 @@ class Discovery:
             templates = [self._template(n) for n in self.candidates]
             selection = forward_selection(data, r_nom, templates, self.max_effects, progress=self._say)
         self.selection_: Selection | None = selection
+        self.limits_ += selection.form_limits
         chosen = selection.chosen
         # only what the flight determined goes into the model (discovery.determination)
         self.effects_, self.param_std_, self.undetermined_ = determined(list(chosen.fit.effects),
