@@ -253,7 +253,7 @@ def _form_limits(evaluator: _Evaluator, current: Candidate) -> list[dict]:
     The plain form is kept when the fuller one does not pay for its extra parameters or leaves
     them undetermined; the plain form's parameters then describe the flown range only, and the
     user learns that the literature's form was tried and what its extra parameters came to."""
-    from discovery.determination import _manoeuvre, undetermined_cases
+    from discovery.determination import determining_manoeuvre, undetermined_cases
 
     out = []
     for key in current.names:
@@ -277,7 +277,7 @@ def _form_limits(evaluator: _Evaluator, current: Candidate) -> list[dict]:
                        "not pay for its extra parameter")
             out.append({"effects": [form], "reason": f"the fuller form was fitted ({values}) but {why}; the plain form "
                                                      "is kept and its parameters describe the flown distances only",
-                        "manoeuvre": _manoeuvre(key, extra[0].name, None)})
+                        "manoeuvre": determining_manoeuvre(key, extra[0].name)})
     return out
 
 
