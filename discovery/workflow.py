@@ -138,7 +138,7 @@ class Discovery:
 
         BLAS runs on one thread meanwhile: the least-squares matrices have a few thousand rows
         and at most a dozen columns, so threads gain nothing, and on a busy machine their
-        waiting made each small SVD 100 times slower (fitting a one-minute log took 6 s
+        waiting made each small SVD 70 times slower (fitting a one-minute log took 6 s
         instead of 2 s at load 3 on two cores).
         """
         with threadpool_limits(limits=1, user_api="blas"):
