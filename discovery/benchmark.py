@@ -116,6 +116,18 @@ def _acceptance(args: argparse.Namespace) -> int:
                 continue
             print(f"{record['case']:42s} {record['rate_hz']:6.0f} Hz  found {','.join(record['named']) or '-':40s} "
                   f"{'ok ' if record['named_right'] else 'BAD'}", flush=True)
+    summary = summarise(records, seeds, duration)
+    if args.json:
+        Path(args.json).write_text(json.dumps({"summary": summary, "logs": records}, indent=2, default=str))
+        print(f"wrote {args.json}")
+    return 0
+
+
+def summarise(records: list[dict], seeds: list[int], duration: float) -> dict:
+    """Print the acceptance figures of ``records`` (as :func:`discovery.hidden_effects.fly_and_discover`
+    returns them, with their ``case``) and return them as a dict."""
+    import numpy as np
+
     ended = [r for r in records if r["ended_early"]]
     records_flown = [r for r in records if not r["ended_early"]]
     hidden = [r for r in records_flown if r["flown"]]
@@ -126,7 +138,7 @@ def _acceptance(args: argparse.Namespace) -> int:
     gaps = [r["gap_reduction"] for r in hidden]
     # misses of 10 %, told apart by the fit's own standard errors: within 2 the log does not
     # determine the parameter to 10 % (noise), beyond 2 the estimate is off by more than its noise
-    off = [(r["case"], k, e, r.get("param_errors_in_std", {}).get(k),
+    off = [(f"{r['case']} (log seed {r['seed']}, {r['rate_hz']:g} Hz)", k, e, r.get("param_errors_in_std", {}).get(k),
             [] if r["form_right"] else r.get("forms_left_open", [])) for r in right
            for k, e in r["param_errors"].items() if e is None or e > 0.10]
     off_noise = [o for o in off if o[3] is not None and o[3] <= 2.0 and not o[4]]
@@ -168,10 +180,7 @@ def _acceptance(args: argparse.Namespace) -> int:
     print(f"clean logs with nothing named: {summary['clean_logs_nothing_named']}/{len(clean)}")
     if ended:
         print(f"flights that ended early (collision) and were not counted: {len(ended)}")
-    if args.json:
-        Path(args.json).write_text(json.dumps({"summary": summary, "logs": records}, indent=2, default=str))
-        print(f"wrote {args.json}")
-    return 0
+    return summary
 
 
 def _timing(args: argparse.Namespace) -> int:
