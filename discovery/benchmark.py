@@ -3,8 +3,10 @@
 Timing: flies a 60 s, 100 Hz wall survey with two hidden effects (wall suction and
 extra linear drag), then times ``wall-inspector discover`` on it twice: as a fresh
 process (what a user waits for: interpreter start, imports, compile-cache lookups,
-fitting, report and plots) and inside this process (the workflow alone). The target
-is at most 5 s per minute of 100 Hz log as a command.
+fitting, report and plots) and inside this process (the same command without the
+interpreter's start and imports). The target is at most 5 s per minute of 100 Hz log as
+a command; both figures are checked against it and printed with the load average, since
+on a shared machine the figures follow the load.
 
 ``--acceptance``: flies hidden-effect logs (:mod:`discovery.hidden_effects`): every
 form of :data:`~discovery.hidden_effects.FORMS` (the library's effects and the
@@ -20,8 +22,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import io
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -112,6 +116,18 @@ def _acceptance(args: argparse.Namespace) -> int:
                 continue
             print(f"{record['case']:42s} {record['rate_hz']:6.0f} Hz  found {','.join(record['named']) or '-':40s} "
                   f"{'ok ' if record['named_right'] else 'BAD'}", flush=True)
+    summary = summarise(records, seeds, duration)
+    if args.json:
+        Path(args.json).write_text(json.dumps({"summary": summary, "logs": records}, indent=2, default=str))
+        print(f"wrote {args.json}")
+    return 0
+
+
+def summarise(records: list[dict], seeds: list[int], duration: float) -> dict:
+    """Print the acceptance figures of ``records`` (as :func:`discovery.hidden_effects.fly_and_discover`
+    returns them, with their ``case``) and return them as a dict."""
+    import numpy as np
+
     ended = [r for r in records if r["ended_early"]]
     records_flown = [r for r in records if not r["ended_early"]]
     hidden = [r for r in records_flown if r["flown"]]
@@ -120,6 +136,12 @@ def _acceptance(args: argparse.Namespace) -> int:
     param_errors = [e for r in right for e in r["param_errors"].values() if e is not None]
     within = [r for r in right if all(e is not None and e <= 0.10 for e in r["param_errors"].values())]
     gaps = [r["gap_reduction"] for r in hidden]
+    # misses of 10 %, told apart by the fit's own standard errors: within 2 the log does not
+    # determine the parameter to 10 % (noise), beyond 2 the estimate is off by more than its noise
+    off = [(f"{r['case']} (log seed {r['seed']}, {r['rate_hz']:g} Hz)", k, e, r.get("param_errors_in_std", {}).get(k),
+            [] if r["form_right"] else r.get("forms_left_open", [])) for r in right
+           for k, e in r["param_errors"].items() if e is None or e > 0.10]
+    off_noise = [o for o in off if o[3] is not None and o[3] <= 2.0 and not o[4]]
     summary = {
         "logs_with_hidden_effects": len(hidden),
         "named_right_no_spurious": len(right),
@@ -129,6 +151,9 @@ def _acceptance(args: argparse.Namespace) -> int:
         "logs_with_all_params_within_10_percent": len(within),
         "worst_param_error": max(param_errors, default=None),
         "median_param_error": float(np.median(param_errors)) if param_errors else None,
+        "params_off_by_more_than_10_percent": [{"case": c, "param": k, "error": e, "error_in_std": z,
+                                               "forms_left_open": f} for c, k, e, z, f in off],
+        "params_off_within_2_std": len(off_noise),
         "worst_force_gap_reduction": min(gaps, default=None),
         "logs_with_gap_reduction_80_percent": sum(g >= 0.8 for g in gaps),
         "clean_logs": len(clean),
@@ -140,15 +165,22 @@ def _acceptance(args: argparse.Namespace) -> int:
           f"{summary['forms_right']}/{len(right)}")
     print(f"all parameters within 10 %: {len(within)}/{len(right)} logs named right; worst parameter error "
           f"{100 * (summary['worst_param_error'] or 0):.1f} %, median {100 * (summary['median_param_error'] or 0):.1f} %")
+    for case, key, error, z, forms in off:
+        print(f"  off by more than 10 %: {case}: {key} "
+              f"{'missing' if error is None else f'{100 * error:.1f} %'}"
+              f"{'' if z is None or forms else f', {z:.1f} standard errors'}"
+              f"{f' (plain form kept: the report names {forms} as left open, with the manoeuvre)' if forms else ''}")
+    if off:
+        left_open = sum(1 for o in off if o[4])
+        print(f"  of these, {len(off_noise)} within 2 standard errors of the truth (the log does not determine them "
+              f"to 10 %), {left_open} of a fuller form the report names as left open, "
+              f"{len(off) - len(off_noise) - left_open} farther or missing")
     print(f"held-out force gap reduced by >= 80 %: {summary['logs_with_gap_reduction_80_percent']}/{len(hidden)}; "
           f"worst reduction {100 * summary['worst_force_gap_reduction']:.0f} %")
     print(f"clean logs with nothing named: {summary['clean_logs_nothing_named']}/{len(clean)}")
     if ended:
         print(f"flights that ended early (collision) and were not counted: {len(ended)}")
-    if args.json:
-        Path(args.json).write_text(json.dumps({"summary": summary, "logs": records}, indent=2, default=str))
-        print(f"wrote {args.json}")
-    return 0
+    return summary
 
 
 def _timing(args: argparse.Namespace) -> int:
@@ -161,6 +193,10 @@ def _timing(args: argparse.Namespace) -> int:
         command = [sys.executable, "-m", "wall_inspector.cli", "discover", str(log), "--out", str(Path(tmp) / "cmd"),
                    "--quiet"]
         process_times, inprocess_times = [], []
+        # the in-process figure is the work alone: the modules discover loads are imported first
+        for module in ("discovery.cli", "discovery.workflow", "discovery.report", "discovery.plots", "matplotlib.figure"):
+            importlib.import_module(module)
+        load_start = os.getloadavg()
         for i in range(args.repeats):
             start = time.perf_counter()
             subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
@@ -171,19 +207,23 @@ def _timing(args: argparse.Namespace) -> int:
             inprocess_times.append(time.perf_counter() - start)
         found = sorted(e["name"] for e in json.loads((Path(tmp) / "run0" / "report.json").read_text())["effects"])
 
-    worst = max(process_times)
+    worst, worst_inprocess = max(process_times), max(inprocess_times)
     target = TARGET_S_PER_MINUTE * args.duration / 60.0
+    load_end = os.getloadavg()
     print(f"discover on a {args.duration:g} s, 100 Hz log ({len(found)} effects found: {', '.join(found)})")
     print(f"  as a command:    {', '.join(f'{t:.2f}' for t in process_times)} s")
     print(f"  in one process:  {', '.join(f'{t:.2f}' for t in inprocess_times)} s")
-    print(f"per minute of log as a command: {60.0 * worst / args.duration:.2f} s (slowest run)")
-    print(f"target <= {TARGET_S_PER_MINUTE:g} s per minute of 100 Hz log as a command: "
-          f"{'met' if worst <= target else 'NOT met'} (slowest {worst:.2f} s for {args.duration:g} s)")
+    print(f"load average (1 min) {load_start[0]:.2f} at the start, {load_end[0]:.2f} at the end, on {os.cpu_count()} CPUs")
+    for label, slowest in (("as a command", worst), ("in one process", worst_inprocess)):
+        print(f"per minute of log {label}: {60.0 * slowest / args.duration:.2f} s (slowest run); target <= "
+              f"{TARGET_S_PER_MINUTE:g} s: {'met' if slowest <= target else 'NOT met'}")
     if args.json:
         Path(args.json).write_text(json.dumps({
             "log_duration_s": args.duration, "rate_hz": 100.0, "effects_found": found,
             "command_s": process_times, "in_process_s": inprocess_times,
             "target_s_per_minute": TARGET_S_PER_MINUTE, "target_met": worst <= target,
+            "in_process_target_met": worst_inprocess <= target,
+            "load_average_start": list(load_start), "load_average_end": list(load_end), "cpus": os.cpu_count(),
         }, indent=2))
         print(f"wrote {args.json}")
     return 0

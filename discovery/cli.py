@@ -32,8 +32,7 @@ import sys
 import time
 from pathlib import Path
 
-from discovery.flight_log import LogFormatError, read_log, sidecar_path
-from discovery.fly import scenario_path
+from discovery.flight_log import LogFormatError, read_log, scenario_path, sidecar_path
 from wall_env.effects import EFFECTS
 
 __all__ = ["add_arguments", "run", "OUTPUT_FILES"]

@@ -20,8 +20,8 @@ Two checks that make a report say *why* it could or could not say more:
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 
+from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 
 __all__ = ["REST_THRUST_SHARE", "resting_on_ground", "flight_limits", "scene_problems"]
@@ -39,7 +39,7 @@ def resting_on_ground(log: FlightLog) -> np.ndarray:
     vertical = thrust * log.R_body_to_world[:, 2, 2]
     weight = log.vehicle.mass * log.gravity
     dt = float(np.median(np.diff(log.t)))
-    v_smooth = uniform_filter1d(log.v_world[:, 2], size=max(1, int(round(0.5 / dt))), mode="nearest")
+    v_smooth = moving_average(log.v_world[:, 2], max(1, int(round(0.5 / dt))))
     a_z = np.gradient(v_smooth, log.t)
     # with the thrust carrying a share s < 1/2 of the weight a free vehicle falls at (1 - s) g > g / 2
     not_falling = a_z > -NOT_FALLING * log.gravity

@@ -22,7 +22,7 @@ import numpy as np
 from wall_env.effects import Effect
 
 __all__ = ["Z_95", "NULL_VALUES", "MANOEUVRES", "Undetermined", "undetermined_cases", "restrict", "determined",
-           "separating_manoeuvre"]
+           "determining_manoeuvre", "separating_manoeuvre"]
 
 Z_95 = 1.96
 NULL_VALUES = {"k_s": 0.0, "d_thr": 0.0, "D": 0.0, "C": 0.0, "F": 0.0, "w": 0.0, "scale": 1.0, "radius": 0.0}
@@ -31,9 +31,11 @@ MANOEUVRES = {
     ("wall_suction", "k_s"): "fly with the rotors within 0.15 m of the wall, at several distances",
     ("wall_suction", "d_thr"): "fly from 0.3 m in to 0.07 m from the wall and back, slowly",
     ("ground_effect", "radius"): "hover at several heights from 0.1 m to 0.5 m above the ground",
-    ("ground_effect", "offset"): "hover at several heights from 0.1 m to 0.5 m above the ground",
+    ("ground_effect", "offset"): "fly slowly from 0.3 m down to within 0.03 m of the ground and back, several "
+                                 "times (the offset shows where the height is comparable to it)",
     ("ceiling_effect", "radius"): "hover at several distances from 0.1 m to 0.5 m under the ceiling",
-    ("ceiling_effect", "offset"): "hover at several distances from 0.1 m to 0.5 m under the ceiling",
+    ("ceiling_effect", "offset"): "fly slowly from 0.3 m in to within 0.03 m of the ceiling and back, several "
+                                  "times (the offset shows where the distance is comparable to it)",
     ("thrust_scale", "scale"): "climb and descend briskly (thrust varying by 20 % or more)",
     ("constant_force", "F"): "a longer flight (the force is within its noise)",
 }
@@ -43,7 +45,8 @@ class Undetermined(dict):
     """``{"effect", "parameter", "name", "index", "value", "std", "reason", "action", "manoeuvre"}``."""
 
 
-def _manoeuvre(effect: str, name: str, index: int | None) -> str:
+def determining_manoeuvre(effect: str, name: str, index: int | None = None) -> str:
+    """The flight that would determine parameter ``name`` (entry ``index`` of a vector) of ``effect``."""
     if name in ("D", "C") and index is not None:
         return f"fly back and forth along body {_AXES[index]} at 1 m/s or more"
     if name == "w" and index is not None:
@@ -84,7 +87,7 @@ def undetermined_cases(effects: list[Effect], stds: list[dict]) -> list[Undeterm
                     effect=effect.name, parameter=p.name if index is None else f"{p.name}[{i}]", name=p.name,
                     index=index, value=float(value[i]), std=float(error[i]), reason=reason,
                     action=f"set to {null or 0.0:g} in the model file" if nullable else "effect left out of the model file",
-                    manoeuvre=_manoeuvre(effect.name, p.name, index)))
+                    manoeuvre=determining_manoeuvre(effect.name, p.name, index)))
     return cases
 
 

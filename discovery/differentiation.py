@@ -25,10 +25,9 @@ lacks.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import fftconvolve
 from scipy.sparse import csr_matrix
 
-__all__ = ["LocalPolynomial", "window_samples"]
+__all__ = ["LocalPolynomial", "moving_average", "window_samples"]
 
 _ROWS_PER_BLOCK = 4096  # rows solved at once (bounds memory at 1 kHz)
 
@@ -40,6 +39,31 @@ def window_samples(t: np.ndarray, window_s: float, order: int) -> int:
     w = max(w, order + 3)
     w += 1 - w % 2
     return min(w, len(t) if len(t) % 2 == 1 else len(t) - 1)
+
+
+def moving_average(x: np.ndarray, size: int) -> np.ndarray:
+    """Mean over ``size`` samples around each sample along axis 0, ends padded with the end values.
+
+    The same as ``scipy.ndimage.uniform_filter1d(x, size, axis=0, mode="nearest")``, without the import
+    of ``scipy.ndimage`` (a fifth of a second).
+    """
+    x = np.asarray(x, dtype=float)
+    size = max(1, int(size))
+    padded = np.concatenate([np.repeat(x[:1], size // 2, axis=0), x, np.repeat(x[-1:], (size - 1) // 2, axis=0)])
+    sums = np.cumsum(np.concatenate([np.zeros_like(x[:1]), padded]), axis=0)
+    return (sums[size:] - sums[:-size]) / size
+
+
+def _correlate_valid(x: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Valid correlation along axis 0 by FFT: entry ``m`` is ``sum_j h[j] x[m + j]``, ``(n - len(h) + 1, d)``.
+
+    NumPy's FFT rather than ``scipy.signal.fftconvolve``: importing ``scipy.signal`` takes about half a
+    second, a tenth of the whole ``discover`` command's budget for a one-minute log.
+    """
+    n, w = len(x), len(h)
+    size = 1 << int(np.ceil(np.log2(n + w - 1)))
+    spectrum = np.fft.rfft(x, size, axis=0) * np.fft.rfft(h[::-1], size)[:, None]
+    return np.fft.irfft(spectrum, size, axis=0)[w - 1 : n]
 
 
 class LocalPolynomial:
@@ -160,7 +184,7 @@ class LocalPolynomial:
         if self.uniform:
             h = self.interior[kind]
             # valid correlation: entry m is sum_j h[j] x[m + j], the window of row m + half
-            valid = fftconvolve(flat, h[::-1, None], mode="valid", axes=0)
+            valid = _correlate_valid(flat, h)
             out[self.half : self.n - self.half] = valid[: self.n - 2 * self.half]
         weights = self.edge[kind]
         idx = self.start[self.rows, None] + np.arange(weights.shape[1])

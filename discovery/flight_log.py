@@ -82,6 +82,7 @@ __all__ = [
     "read_log",
     "write_log",
     "sidecar_path",
+    "scenario_path",
     "parse_sidecar",
     "csv_output_problem",
     "read_vehicle_and_scene",
@@ -261,6 +262,12 @@ def quaternions_to_matrices(q: np.ndarray) -> np.ndarray:
 def sidecar_path(csv_path: str | Path) -> Path:
     """The JSON file beside a CSV log (same base name)."""
     return Path(csv_path).with_suffix(".json")
+
+
+def scenario_path(csv_path: str | Path) -> Path:
+    """Where ``wall-inspector fly`` writes the ground truth of a simulated log: ``<name>.scenario.json``."""
+    path = Path(csv_path)
+    return path.with_name(path.stem + ".scenario.json")
 
 
 # ====================================================================== reading

@@ -47,7 +47,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 import wall_env  # noqa: F401  (registers the environments)
-from discovery.flight_log import FlightLog, NominalVehicle, csv_output_problem, write_log
+from discovery.flight_log import FlightLog, NominalVehicle, csv_output_problem, scenario_path, write_log
 from discovery.scenarios import SCENARIOS, Retarget, survey_for
 from wall_env.effects import Effect, effects_from_spec
 from wall_env.vehicle import VehicleParams
@@ -248,12 +248,6 @@ def record_flight(env: gym.Env, policy: Any, *, seed: int, nominal_vehicle: Vehi
         "effect_forces_world": {k: np.array([e[k] for e in effect_forces]) for k in names},
     }
     return log, summary
-
-
-def scenario_path(csv_path: str | Path) -> Path:
-    """Where ``fly`` writes the ground truth of a simulated log: ``<name>.scenario.json``."""
-    path = Path(csv_path)
-    return path.with_name(path.stem + ".scenario.json")
 
 
 def fly(env_id: str | None = None, policy: str = "pid", effects: Any = None, seed: int = 0,

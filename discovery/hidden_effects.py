@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FORMS", "PAIRS", "draw", "draw_pair", "spec", "fly_and_discover"]
+__all__ = ["FORMS", "PAIRS", "draw", "draw_pair", "spec", "steady_height_shift", "fly_and_discover"]
 
 ARM = 0.1 / math.sqrt(2.0)  # the default vehicle's rotor offset along body x (m)
 FORMS = ("wall_suction", "wall_suction_scaled", "ground_effect", "ground_effect_offset", "ceiling_effect",
@@ -87,12 +87,63 @@ def draw(form: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str,
 
 
 def draw_pair(forms: tuple[str, str], rng: np.random.Generator) -> tuple[list[dict], dict[str, Any]]:
-    """Two forms flown together, in the flight of the first (the second acts everywhere)."""
+    """Two forms flown together, in the flight of the first (the second acts everywhere).
+
+    Near the ground the survey's height is planned where the vehicle will hold it: the PID
+    has no integral action, so the second effect's steady vertical force (a thrust scale of
+    0.85 to 1.15, a steady force of up to 0.5 N) would shift the whole survey by up to 17 cm
+    (:func:`steady_height_shift`); with a thrust scale of 1.14 the vehicle flew 19 to 31 cm
+    up instead of 7 to 19 cm, where the ground effect no longer paid for its parameter. Under
+    a ceiling the survey is left where it is: the ceiling effect pulls the vehicle toward the
+    ceiling, and flown at the planned distances with a thrust surplus the PID hit it.
+    """
     first, fly_kwargs = draw(forms[0], rng)
     second, _ = draw(forms[1], rng)
     if first["name"] == "wall_suction" and second["name"] == "constant_force":
         second["params"]["F"][0] = abs(second["params"]["F"][0])  # a breeze off the wall (x = 0, normal +x)
+    if first["name"] == "ground_effect":
+        from discovery.scenarios import SCENARIOS
+
+        scenario = SCENARIOS[fly_kwargs["scenario"]]
+        survey = dict(fly_kwargs.get("survey") or scenario.survey or {})
+        centre = list(survey["centre"])
+        centre[2] -= steady_height_shift(second, _pid_gains(scenario)[2])
+        fly_kwargs = {**fly_kwargs, "survey": {**survey, "centre": tuple(centre)}}
     return [first, second], fly_kwargs
+
+
+def _pid_gains(scenario: Any) -> list[float]:
+    """The position gains (1/s^2) of the PID that flies ``scenario``: its own, else the authors' preset's
+    (:func:`discovery.fly.make_policy` starts from ``preset="paper"``)."""
+    from controllers.presets import load_preset
+
+    return list(scenario.policy_kwargs.get("kp") or load_preset("paper", method="pid").controller_kwargs("pid")["kp"])
+
+
+def steady_height_shift(effect: dict, kp_z: float) -> float:
+    """Height (m, up) at which a PID without integral action (position gain ``kp_z``, 1/s^2) settles
+    above its reference at hover under ``effect``.
+
+    The PID commands the collective thrust ``T = m (g - kp_z e)`` for a height error ``e``; at
+    rest ``T`` plus the effect's vertical force at ``T`` (from the library's own definition)
+    carries the weight, which a few fixed-point steps solve.
+    """
+    from wall_env.aero import AeroModel
+    from wall_env.effects import make_effect
+    from wall_env.scene import Scene
+    from wall_env.vehicle import GRAVITY, VehicleParams
+
+    vehicle = VehicleParams()
+    model = AeroModel([make_effect(effect["name"], **effect["params"])])
+    scene = Scene(ground_z=None)  # nothing near: the effects that act everywhere
+    function = model.function(np.asarray(vehicle.rotor_positions), scene)
+    weight = vehicle.mass * GRAVITY
+    thrust = weight
+    for _ in range(30):
+        force = function([0.0, 0.0, 1.0], np.eye(3), np.zeros(3), np.zeros(3), np.full(4, thrust / 4.0),
+                         vehicle.mass, model.theta(), scene.to_vector())[0]
+        thrust = weight - float(force[2])
+    return (weight - thrust) / (vehicle.mass * kp_z)
 
 
 def spec(effects: list[dict]) -> str:
@@ -121,8 +172,10 @@ def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int,
     flown = sorted(e["name"] for e in effects)
     named = sorted(found.names_)
     errors: dict[str, float | None] = {}
+    sigmas: dict[str, float | None] = {}  # the error in the fit's own standard errors (largest entry)
     for e in effects:
         fitted = next((f for f in found.effects_ if f.name == e["name"]), None)
+        stds = next((std for f, std in zip(found.effects_, found.param_std_) if f.name == e["name"]), {})
         for key, true in e["params"].items():
             if isinstance(true, bool):
                 continue
@@ -131,6 +184,11 @@ def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int,
                 errors[f"{e['name']}.{key}"] = None
                 continue
             got = np.atleast_1d(fitted.values[key])
+            std = np.atleast_1d(np.asarray(stds.get(key, np.nan), dtype=float))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                sigma = np.abs(got - truth) / std
+            finite = np.isfinite(sigma)  # entries left at their null value have no standard error
+            sigmas[f"{e['name']}.{key}"] = float(np.max(sigma[finite])) if finite.any() else None
             big = np.abs(truth) > 1e-9
             if key == "w":  # a wind vector: error relative to the wind speed
                 errors[f"{e['name']}.{key}"] = float(np.linalg.norm(got - truth) / np.linalg.norm(truth))
@@ -142,10 +200,11 @@ def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int,
     before, after = found.gap_before_["force_rms_N"], found.gap_after_["force_rms_N"]
     return {"flown": effects, "ended_early": False, "named": named, "named_right": named == flown, "form_right": forms_right,
             "spurious": sorted(set(named) - set(flown)), "missed": sorted(set(flown) - set(named)),
-            "param_errors": errors, "gap_reduction": 1.0 - after / before if before else None,
+            "param_errors": errors, "param_errors_in_std": sigmas, "gap_reduction": 1.0 - after / before if before else None,
             "gap_before_N": before, "gap_after_N": after, "rate_hz": rate_hz, "seed": seed,
             "samples": log.n_samples, "collisions": summary["collisions"], "runtime_s": runtime,
             "undetermined": [f"{c['effect']}.{c['parameter']}" for c in found.undetermined_],
+            "forms_left_open": [limit["effects"][0] for limit in found.limits_ if "[" in limit["effects"][0]],
             "alike": [f"{a['chosen']}~{a['alike']}" for a in found.selection_.alike] if found.selection_ else []}
 
 

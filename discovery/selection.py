@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from discovery.fitting import EffectFit, FitResult, applicable
 from discovery.residuals import FlightData
@@ -77,7 +77,7 @@ def effective_samples(data: FlightData) -> float:
 
 def parameter_price(n_eff_per_axis: float, alpha: float = ALPHA) -> float:
     """``max(chi2_1 quantile at 1 - alpha, ln 3N)``: what each parameter must buy in ``2 x`` log-likelihood."""
-    return max(float(chi2.ppf(1.0 - alpha, 1)), math.log(3.0 * n_eff_per_axis))
+    return max(float(chdtri(1, alpha)), math.log(3.0 * n_eff_per_axis))  # chdtri: chi2's inverse survival
 
 
 def score(mse_axes: np.ndarray, n_params: int, n_eff_per_axis: float, alpha: float = ALPHA) -> float:
@@ -124,6 +124,7 @@ class Selection:
     n_eff: float = 1.0  # independent residual values per axis
     alike: list[dict] = field(default_factory=list)  # candidates the flight could not tell apart
     forms: list[dict] = field(default_factory=list)  # the form (candidate key) of each chosen effect
+    form_limits: list[dict] = field(default_factory=list)  # fuller forms of chosen effects the flight left open
 
 
 def _mse_axes(parts: list[np.ndarray]) -> np.ndarray:
@@ -240,7 +241,44 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     chosen_names = {effect_name(k) for k in current.names}
     alike = [a for a in alike if a["chosen"] in chosen_names]
     forms = [{"effect": effect_name(k), "form": k} for k in current.names]
-    return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms)
+    form_limits = _form_limits(evaluator, current)
+    return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms, form_limits)
+
+
+def _form_limits(evaluator: _Evaluator, current: Candidate) -> list[dict]:
+    """Why each chosen effect kept its plain form where a fuller form has parameters of its own (the
+    ground and ceiling effects' distance offset), with the manoeuvre that would determine them, as
+    ``{"effects", "reason", "manoeuvre"}`` like :func:`discovery.coverage.flight_limits`.
+
+    The plain form is kept when the fuller one does not pay for its extra parameters or leaves
+    them undetermined; the plain form's parameters then describe the flown range only, and the
+    user learns that the literature's form was tried and what its extra parameters came to."""
+    from discovery.determination import determining_manoeuvre, undetermined_cases
+
+    out = []
+    for key in current.names:
+        for form in (k for k in evaluator.templates if "[" in k and effect_name(k) == key):
+            effect = evaluator.templates[form]
+            extra = [p for p in effect.parameters if p not in type(effect).parameters]
+            if not extra:
+                continue
+            names = [form if k == key else k for k in current.names]
+            fuller = evaluator.evaluate(names, previous={k: v for k, v in _params_by_name(current).items() if k != key})
+            index = names.index(form)
+            fitted, std = fuller.fit.effects[index], fuller.fit.std_dicts()[index]
+            open_ = {c["name"] for c in undetermined_cases([fitted], [std])}
+            values = ", ".join(f"{p.name} = {float(np.ravel(fitted.values[p.name])[0]):.3g} +- "
+                               f"{float(np.ravel(std[p.name])[0]):.2g} {p.unit}" for p in extra)
+            if open_ & {p.name for p in extra}:
+                why = "the flight does not determine its extra parameter"
+            else:
+                gain = (current.mse - fuller.mse) / current.mse if current.mse > 0 else 0.0
+                why = (f"it lowers the held-out force gap left by the plain form by only {100 * gain:.2g} %, which does "
+                       "not pay for its extra parameter")
+            out.append({"effects": [form], "reason": f"the fuller form was fitted ({values}) but {why}; the plain form "
+                                                     "is kept and its parameters describe the flown distances only",
+                        "manoeuvre": determining_manoeuvre(key, extra[0].name)})
+    return out
 
 
 def _drag_in_wind(data: FlightData, r_nom: list[np.ndarray], evaluator: _Evaluator, current: Candidate,

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.ndimage import uniform_filter1d
 from scipy.signal import savgol_filter
 from scipy.spatial.transform import Rotation
 
 from discovery.aero_eval import ForceEvaluator, SampleStates
-from discovery.differentiation import LocalPolynomial
+from discovery.differentiation import LocalPolynomial, moving_average
 from discovery.fly import fly
 from discovery.prediction import prediction_errors
 from discovery.residuals import prepare
@@ -79,6 +80,13 @@ def test_vectorised_force_and_jacobian_are_the_librarys(name):
         assert close.mean() > 0.98
 
 
+@pytest.mark.parametrize("size", [1, 2, 5, 50, 51])
+def test_moving_average_is_scipys_uniform_filter(size):
+    x = np.random.default_rng(size).normal(size=(40, 3))
+    assert np.allclose(moving_average(x, size), uniform_filter1d(x, size, axis=0, mode="nearest"), atol=1e-12)
+    assert np.allclose(moving_average(x[:, 0], size), uniform_filter1d(x[:, 0], size, mode="nearest"), atol=1e-12)
+
+
 # ---------------------------------------------------------------------- residual and prediction
 @pytest.fixture(scope="module")
 def noise_free_ground_flight():
@@ -101,6 +109,17 @@ def test_residual_against_the_nominal_model_is_the_missing_force(noise_free_grou
     assert np.abs(residual - truth).max() < 5e-3
     true_model = FlightModel(log.vehicle.to_vehicle_params(), effects_from_spec("ground_effect:radius=0.08"))
     assert np.abs(data.residuals(true_model.aero_model())[0]).max() < 5e-3
+
+
+def test_effects_are_evaluated_where_the_vehicle_was(noise_free_ground_flight):
+    """The state an effect is evaluated at follows the manoeuvre: a force nonlinear in the distance
+    evaluated at a 1 s smoothed position (3.3 mm off on this flight) biased a fitted distance offset by 7 %."""
+    log, _ = noise_free_ground_flight
+    states = prepare([log]).segments[0].states
+    assert np.abs(states.p_world - log.p_world).max() < 5e-5
+    assert np.abs(states.v_world - log.v_world).max() < 5e-3
+    rounded = LocalPolynomial(log.t, 1.0, 2).smooth(log.p_world)
+    assert np.abs(rounded - log.p_world).max() > 1e-3  # what the fit's own window would have given
 
 
 def test_prediction_replaying_the_log_is_exact_with_the_true_model(noise_free_ground_flight):

@@ -91,3 +91,21 @@ def test_undetermined_parameters_never_reach_the_model():
     assert labels[("linear_drag", "D[1]")]["manoeuvre"] == "fly back and forth along body y at 1 m/s or more"
     assert labels[("thrust_scale", "scale")]["action"] == "effect left out of the model file"
     assert "climb and descend" in separating_manoeuvre("constant_force", "thrust_scale")
+
+
+def test_a_plain_form_kept_says_what_its_fuller_form_came_to():
+    """A ceiling effect flown without an offset keeps its plain form; the report names the distance-offset
+    form as left open, with its fitted offset and the manoeuvre that would determine it."""
+    from discovery.fly import fly
+    from discovery.workflow import Discovery
+
+    log, summary = fly(None, "pid", "ceiling_effect:radius=0.07", 3, None, scenario="ceiling-survey", duration=20.0)
+    assert not summary["terminated"]
+    found = Discovery(candidates=["ceiling_effect", "thrust_scale"]).fit(log)
+    assert found.names_ == ["ceiling_effect"]
+    assert found.effects_[0].option_values == {"distance_offset": False}
+    assert found.effects_[0].values["radius"] == pytest.approx(0.07, rel=0.1)
+    (limit,) = [lim for lim in found.limits_ if lim["effects"] == ["ceiling_effect[distance_offset]"]]
+    assert "offset = " in limit["reason"] and "plain form is kept" in limit["reason"]
+    assert "within 0.03 m of the ceiling" in limit["manoeuvre"]
+    assert limit in found.report()["limits"]

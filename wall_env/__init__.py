@@ -22,7 +22,6 @@ from wall_env.actions import ActionMapping
 from wall_env.aero import AeroModel
 from wall_env.config import MAX_EPISODE_STEPS, EnvConfig
 from wall_env.effects import EFFECTS, Effect, effects_from_spec, make_effect
-from wall_env.env import DEFAULT_REWARD_WEIGHTS, WallInspectorEnv
 from wall_env.model_file import FlightModel, nominal_aero_model
 from wall_env.observation import OBSERVATION_FIELDS, parse_observation
 from wall_env.references import Reference
@@ -65,8 +64,14 @@ for _name in TASKS:
 
 
 def __getattr__(name: str):
-    if name == "WallInspectorVectorEnv":  # imported on first use: it pulls in Gymnasium's vector module
+    # imported on first use: the vector env pulls in Gymnasium's vector module, the single env PyBullet and
+    # SciPy's rotations (a quarter of a second that ``wall-inspector discover`` does not need)
+    if name == "WallInspectorVectorEnv":
         from wall_env.vector_env import WallInspectorVectorEnv
 
         return WallInspectorVectorEnv
+    if name in ("WallInspectorEnv", "DEFAULT_REWARD_WEIGHTS"):
+        from wall_env import env
+
+        return getattr(env, name)
     raise AttributeError(f"module 'wall_env' has no attribute {name!r}")

@@ -22,8 +22,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 
+from discovery.differentiation import moving_average
 from discovery.flight_log import ThrustMap
 
 __all__ = ["HoverFit", "hover_mask", "fit_thrust_map", "apply_thrust_map"]
@@ -49,7 +49,7 @@ class HoverFit:
 def _acceleration(t: np.ndarray, v_world: np.ndarray, window_s: float = 0.5) -> np.ndarray:
     dt = float(np.median(np.diff(t)))
     size = max(1, int(round(window_s / dt)))
-    smooth = uniform_filter1d(v_world, size=size, axis=0, mode="nearest")
+    smooth = moving_average(v_world, size)
     return np.gradient(smooth, t, axis=0)
 
 
