@@ -183,6 +183,24 @@ def test_compiled_solve_follows_the_lm_algorithm_and_reaches_ipopt_on_recorded_p
         assert (result.cost - reference.cost) / reference.cost < 1e-6
 
 
+def test_numeric_cold_start_and_stage_parameters_equal_the_compiled_steps(sweep_env):
+    policy = SCMPC.from_env(sweep_env)
+    obs, _ = sweep_env.reset(seed=5)
+    policy.predict(obs, episode_start=np.array([True]))
+    record = policy.last_solves[0]
+    assert record.cold
+    x = obs.astype(float)  # the compiled step reads the float32 observation as float64
+    p_ref_now = x[OBSERVATION_FIELDS["p_world"]] - x[OBSERVATION_FIELDS["p_error"]]
+    memory = policy._episode_memory(0)
+    refs = policy.horizon_reference.build(memory["reference"], x[OBSERVATION_FIELDS["time"]][0], p_ref_now,
+                                          memory["attitude_global"])
+    np.testing.assert_allclose(policy.initial_guess(refs), record.Z0, rtol=1e-12, atol=1e-12)
+    S = policy.problem.stage_params(refs.p_world, refs.v_world, refs.R_body_to_world)
+    np.testing.assert_allclose(S, record.stage_params, rtol=1e-12, atol=1e-12)
+    assert S[-2].tolist() == [0.0] * (policy.problem.horizon - 1) + [1.0]  # terminal residual: last stage only
+    assert S[-1].tolist() == [0.0] + [1.0] * (policy.problem.horizon - 1)  # rate residual: not the first stage
+
+
 def test_batched_predict_gives_the_actions_of_single_predicts():
     n = 4
     envs = gym.make_vec("WallInspector/WallSweep-v0", num_envs=n, vectorization_mode="vector_entry_point",

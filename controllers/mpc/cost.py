@@ -194,9 +194,16 @@ class MPCProblem:
         S[StageParamIndex.v_ref] = np.asarray(v_ref).T
         # column-major flattening of each R, as CasADi's reshape reads it
         S[StageParamIndex.R_ref] = np.asarray(R_ref).transpose(0, 2, 1).reshape(N, 9).T
-        S[StageParamIndex.terminal, N - 1] = 1.0
-        S[StageParamIndex.rate, 1:] = 1.0  # stage 0 has no previous input in the horizon
+        S[StageParamIndex.terminal:] = self.stage_flags()
         return S
+
+    def stage_flags(self) -> np.ndarray:
+        """The last rows of the stage parameters, ``(2, N)``: the terminal flag (last stage only) and
+        the rate flag (every stage but the first, which has no previous input in the horizon)."""
+        flags = np.zeros((STAGE_PARAM_SIZE - StageParamIndex.terminal, self.horizon))
+        flags[StageParamIndex.terminal - StageParamIndex.terminal, -1] = 1.0
+        flags[StageParamIndex.rate - StageParamIndex.terminal, 1:] = 1.0
+        return flags
 
     # ------------------------------------------------------------------ symbolic
     def _split_global(self, g):

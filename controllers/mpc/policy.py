@@ -49,14 +49,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import casadi as ca
 import numpy as np
 
 from controllers.env_description import EnvDescription
 from controllers.mpc.cost import InputLimits, MPCProblem, MPCWeights
 from controllers.mpc.lm import LevenbergMarquardt, LMInfo, LMResult, LMSettings
-from controllers.mpc.manifold import POINT_SIZE, PointIndex
+from controllers.mpc.manifold import POINT_SIZE
 from controllers.mpc.reference import HorizonReference, ReferenceStates
-from controllers.mpc.step import CompiledStep, StepInput, StepOptions, StepOutput, StepStatus
+from controllers.mpc.step import CompiledStep, StepInput, StepOptions, StepOutput, StepStatus, cold_start_guess
 from controllers.policy import ControllerPolicy
 from wall_env.aero import AeroModel
 from wall_env.effects import make_effect
@@ -199,13 +200,9 @@ class MPC(ControllerPolicy):
         """Cold start: the reference states, flatness thrust and zero body rates (as the compiled step
         builds it; for handing a fixed problem to a solver)."""
         N = self.problem.horizon
-        Z = np.empty((POINT_SIZE, N))
-        Z[PointIndex.u] = 0.0
-        Z[0] = refs.thrust
-        Z[PointIndex.p_world] = refs.p_world.T
-        Z[PointIndex.R_body_to_world] = refs.R_body_to_world.transpose(0, 2, 1).reshape(N, 9).T
-        Z[PointIndex.v_world] = refs.v_world.T
-        return Z
+        R_columns = refs.R_body_to_world.transpose(0, 2, 1).reshape(N, 9).T  # column-major per matrix
+        return np.array(cold_start_guess(ca.DM(refs.thrust).T, ca.DM(refs.p_world.T), ca.DM(R_columns),
+                                         ca.DM(refs.v_world.T)))
 
     def _commands(self, batch: np.ndarray) -> np.ndarray:
         t_start, cpu_start = time.perf_counter(), time.thread_time()

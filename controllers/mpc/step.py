@@ -27,14 +27,15 @@ from concurrent.futures import ThreadPoolExecutor
 import casadi as ca
 import numpy as np
 
-from controllers.mpc.cost import STAGE_PARAM_SIZE, MPCProblem, StageParamIndex
+from controllers.mpc.cost import MPCProblem
 from controllers.mpc.lm import LMInfo, LMSettings, finite, solve_function
 from controllers.mpc.manifold import POINT_SIZE, PointIndex
 from controllers.mpc.reference import ReferenceOptions, reference_function
 from wall_env.codegen import NATIVE_FLAGS, BatchedFunction
 from wall_env.observation import OBSERVATION_FIELDS, OBSERVATION_SIZE
 
-__all__ = ["StepInput", "StepOutput", "StepOptions", "StepStatus", "build_step_function", "CompiledStep"]
+__all__ = ["StepInput", "StepOutput", "StepOptions", "StepStatus", "build_step_function", "cold_start_guess",
+           "CompiledStep"]
 
 
 class StepOptions:
@@ -69,6 +70,13 @@ class StepStatus:
     finite_observation = 1
     cold = 2  # the solve started cold (the ``cold`` input)
     size = 3
+
+
+def cold_start_guess(thrust, p_ref, R_ref, v_ref):
+    """The blocks ``(19, N)`` a cold start begins from: the reference states (``p_ref (3, N)``,
+    ``R_ref (9, N)`` column-major per matrix, ``v_ref (3, N)``), the flatness thrust ``(1, N)``
+    and zero body rates. Symbolic (inside the control step) or numeric (CasADi ``DM``) alike."""
+    return ca.vertcat(thrust, ca.DM.zeros(3, thrust.shape[1]), p_ref, R_ref, v_ref)
 
 
 def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift: int,
@@ -107,11 +115,8 @@ def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift
     p_ref, v_ref, R_ref, thrust = reference_function(attitude_problem)(
         samples, p_ref_now, Z_warm[PointIndex.p_world, :], Z_warm[PointIndex.v_world, :], g_attitude,
         reference_options)
-    flags = np.zeros((STAGE_PARAM_SIZE - StageParamIndex.terminal, N))
-    flags[StageParamIndex.terminal - StageParamIndex.terminal, N - 1] = 1.0  # terminal residual in the last stage
-    flags[StageParamIndex.rate - StageParamIndex.terminal, 1:] = 1.0  # stage 0 has no previous input
-    S = ca.vertcat(p_ref, v_ref, R_ref, ca.DM(flags))  # the rows of StageParamIndex
-    Z_cold = ca.vertcat(thrust, ca.MX.zeros(3, N), p_ref, R_ref, v_ref)
+    S = ca.vertcat(p_ref, v_ref, R_ref, ca.DM(problem.stage_flags()))  # the rows of StageParamIndex
+    Z_cold = cold_start_guess(thrust, p_ref, R_ref, v_ref)
     Z0 = ca.if_else(cold, Z_cold, Z_warm)
     start = ca.vertcat(ca.MX.zeros(4), x_now)  # its input slot is unused
     limit = ca.if_else(cold, options[StepOptions.max_iterations_cold], options[StepOptions.max_iterations])
