@@ -131,6 +131,29 @@ def test_warm_started_lm_reaches_ipopt_cost_in_a_few_iterations(sweep_env):
     assert max(iterations) <= 4
 
 
+def test_one_iteration_per_step_tracks_like_the_converged_solve(sweep_env):
+    """Real-time iteration (``solver={"max_iterations": 1}``, the residual agents' base): one LM
+    iteration per warm step from the shifted solution flies the sweep like the converged solves."""
+    errors, commands = {}, {}
+    for limit in (1, 4):
+        policy = SCMPC.from_env(sweep_env, solver={"max_iterations": limit})
+        assert policy.solver.settings.max_iterations == limit
+        obs, _ = sweep_env.reset(seed=7)
+        normal, actions = [], []
+        for i in range(900):  # 9 s: into the suction zone and along the wall
+            action, _ = policy.predict(obs, episode_start=np.array([i == 0]))
+            obs, _, terminated, truncated, info = sweep_env.step(action)
+            assert not (terminated or truncated)
+            normal.append(info["wall_clearance"])
+            actions.append(action)
+        warm = policy.iteration_counts[1:]
+        assert (max(warm) == 1) if limit == 1 else (np.mean(warm) > 1.5)
+        errors[limit], commands[limit] = np.asarray(normal), np.asarray(actions)
+    # the same flight to a tenth of a millimetre of clearance; normalised commands (range 2) within 3e-3
+    np.testing.assert_allclose(errors[1], errors[4], atol=1e-4)
+    assert np.max(np.abs(commands[1] - commands[4])) < 3e-3
+
+
 def _python_lm(solver: LevenbergMarquardt, Z, start, S, g, limit: int):
     """The documented accept/reject loop (Madsen, Nielsen & Tingleff, Sec. 3.2) in plain Python, on the
     compiled iteration function: the oracle for the compiled, unrolled solve."""
@@ -403,6 +426,9 @@ def test_from_env_reads_only_the_public_description(sweep_env):
     (lambda env: MPC.from_env(env, weights=MPCWeights(position=(0.1, -0.1, 0.1))), "weights.position"),
     (lambda env: MPC.from_env(env, limits=InputLimits(thrust_min=30.0)), "limits.thrust_max"),
     (lambda env: MPC.from_env(env, solver=LMSettings(max_iterations=0)), "max_iterations"),
+    (lambda env: MPC.from_env(env, solver={"max_iterations": 0}), "max_iterations"),
+    (lambda env: MPC.from_env(env, solver={"max_iters": 1}), "solver.*max_iterations"),
+    (lambda env: MPC.from_env(env, solver=4), "solver"),
     (lambda env: MPC.from_env(env, max_tilt_deg=90.0), "max_tilt_deg"),
     (lambda env: MPC.from_env(env, model="drag"), "model"),
 ])

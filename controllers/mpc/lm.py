@@ -28,7 +28,7 @@ Cost convention: ``F = sum r^T r`` (the weighted squared residuals, no factor 1/
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import casadi as ca
@@ -367,6 +367,20 @@ class LMSettings:
         if not (0 <= self.step_tolerance < 1):
             raise ValueError(f"step_tolerance must be in [0, 1), got {self.step_tolerance!r}")
 
+    @classmethod
+    def coerce(cls, value: LMSettings | dict[str, Any] | None) -> LMSettings:
+        """``value`` as settings: ``None`` gives the defaults, a mapping (from a YAML configuration,
+        e.g. ``{"max_iterations": 1}``) replaces the named defaults."""
+        if value is None or isinstance(value, cls):
+            return value if value is not None else cls()
+        if not isinstance(value, dict):
+            raise ValueError(f"solver must be LMSettings or a mapping of its fields, got {type(value).__name__}")
+        allowed = [f.name for f in fields(cls)]
+        unknown = sorted(set(value) - set(allowed))
+        if unknown:
+            raise ValueError(f"solver has unknown settings {unknown}; allowed: {allowed}")
+        return cls(**value)
+
     @property
     def unrolled(self) -> int:
         """Iterations the compiled solve unrolls: the larger of the two limits."""
@@ -426,9 +440,9 @@ class LevenbergMarquardt:
     new processes) a few milliseconds. Nothing is compiled before it is used.
     """
 
-    def __init__(self, problem: MPCProblem, settings: LMSettings | None = None):
+    def __init__(self, problem: MPCProblem, settings: LMSettings | dict[str, Any] | None = None):
         self.problem = problem
-        self.settings = settings if settings is not None else LMSettings()
+        self.settings = LMSettings.coerce(settings)
         self._iteration: CompiledFunction | None = None
         self._cost_function: CompiledFunction | None = None
         self._solvers: dict[int, tuple[BatchedFunction, list[np.ndarray], list[np.ndarray]]] = {}

@@ -98,7 +98,8 @@ class MPC(ControllerPolicy):
     vehicle: the vehicle of the prediction model (mass, rotor layout); default the env's.
     horizon, dt: N steps of dt seconds (paper: 20, 0.01 s).
     weights, limits: :class:`MPCWeights`, :class:`InputLimits` (defaults: the authors' release).
-    solver: :class:`LMSettings` (iteration limits, tolerances).
+    solver: :class:`LMSettings` (iteration limits, tolerances), or a mapping of its fields
+        (``{"max_iterations": 1}``: one iteration per control step, real-time-iteration style).
     max_tilt_deg: tilt limit of the flatness attitude reference.
     model_attitude: attitude reference from flatness with the model's force (default;
         see :mod:`controllers.mpc.reference`), or from kinematics alone.
@@ -116,7 +117,7 @@ class MPC(ControllerPolicy):
     def __init__(self, description: EnvDescription, model: AeroModel | None = None, *,
                  vehicle: VehicleParams | None = None, horizon: int = 20, dt: float = 0.01,
                  weights: MPCWeights | None = None, limits: InputLimits | None = None,
-                 solver: LMSettings | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True,
+                 solver: LMSettings | dict[str, Any] | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True,
                  force_at_prediction: bool = True, attitude_model: AeroModel | None = None, threads: int = 1):
         super().__init__(description)
         if model is not None and not isinstance(model, AeroModel):
