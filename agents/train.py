@@ -360,8 +360,10 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         else:
             model = _make_ppo(config, train_env, out / "tb", verbose)
 
-        # the same wrappers as the training env (sync_envs_normalization walks both stacks)
-        eval_env = VecNormalize(make_vec_env(config, 1, 0, vector=vector_kind(config)), training=False,
+        # the same wrappers as the training env (sync_envs_normalization walks both stacks); one env
+        # per evaluation episode (up to 32), so an evaluation flies its episodes side by side
+        eval_envs = min(int(config["eval"]["episodes"]), 32)
+        eval_env = VecNormalize(make_vec_env(config, eval_envs, 0, vector=vector_kind(config)), training=False,
                                 norm_obs=norm["norm_obs"], norm_reward=False, clip_obs=float(norm["clip_obs"]))
         eval_env.seed(int(config["eval"]["seed"]))
         clock = TrainingClock(previous_wall)
