@@ -28,12 +28,21 @@ def replace_block(text: str, name: str, content: str) -> str:
 _BASE_NAMES = {"scmpc": "SC-MPC", "pid": "PID"}
 
 
+def _envs(training: dict) -> str:
+    """How a card's envs ran: ``"256 batched"`` or ``"32 in 2 processes"``."""
+    n = training.get("n_envs", "?")
+    if training.get("vector") == "batched":
+        return f"{n} batched"
+    workers = training.get("n_workers", 0)
+    return f"{n} in {workers} processes" if workers else f"{n} in 1 process"
+
+
 def agents_table(pretrained: Path) -> str:
     """One row per shipped agent, from its ``model_card.json``."""
     lines = [
-        "| agent | timesteps | training wall time | env steps/s (2 processes) | episodes completed | "
+        "| agent | timesteps | training wall time | env steps/s | envs | episodes completed | "
         "position RMSE | wall-normal RMSE | contact steps |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---:|---:|---:|---|---:|---:|---:|---:|",
     ]
     seeds = set()
     for card_path in sorted(pretrained.glob("*/model_card.json")):
@@ -45,10 +54,11 @@ def agents_table(pretrained: Path) -> str:
             name += f", residual on {_BASE_NAMES.get(card['residual'], card['residual'])}"
         lines.append(
             f"| [{name}]({card_path.parent.as_posix()}/model_card.md) | {t['total_timesteps']:,} | "
-            f"{t['total_wall_time_s'] / 60:.1f} min | {t['steps_per_s']:,.0f} | {100 * m['completed']:.0f} % | "
+            f"{t['total_wall_time_s'] / 60:.1f} min | {t['steps_per_s']:,.0f} | {_envs(t)} | {100 * m['completed']:.0f} % | "
             f"{100 * m['position_rmse_m']:.2f} cm | {100 * m['wall_normal_rmse_m']:.2f} cm | {m['collisions']} |")
     lines += ["", f"From each agent's model card: trained by `wall-inspector train ... --ship` on this 2-core machine "
-              f"(the card holds the exact command), evaluated on the task's nominal settings with command noise "
+              f"(the card holds the exact command; env steps/s include the evaluations during training), "
+              f"evaluated on the task's nominal settings with command noise "
               f"over {'/'.join(str(n) for n in sorted(seeds))} seeds by the evaluation function of the comparison tables."]
     return "\n".join(lines) + "\n"
 
