@@ -30,7 +30,8 @@ def test_the_command_copies_a_file_into_the_readme(tmp_path):
 def test_model_cards_become_one_row_each(tmp_path):
     card = {
         "env_id": "WallInspector/WallSweep-v0", "residual": None,
-        "training": {"total_timesteps": 10_000_000, "total_wall_time_s": 1500.0, "steps_per_s": 6700.0},
+        "training": {"total_timesteps": 10_000_000, "total_wall_time_s": 1500.0, "steps_per_s": 6700.0,
+                     "n_envs": 256, "vector": "batched", "n_workers": 0},
         "evaluation": {"seeds": list(range(10)), "metrics": {
             "completed": 1.0, "position_rmse_m": 0.031, "wall_normal_rmse_m": 0.0281, "collisions": 0}},
     }
@@ -38,8 +39,11 @@ def test_model_cards_become_one_row_each(tmp_path):
     (tmp_path / "wall_sweep" / "model_card.json").write_text(json.dumps(card))
     text = agents_table(tmp_path)
     row = [line for line in text.splitlines() if "WallSweep-v0" in line][0]
-    assert "| 10,000,000 | 25.0 min | 6,700 | 100 % | 3.10 cm | 2.81 cm | 0 |" in row
+    assert "| 10,000,000 | 25.0 min | 6,700 | 256 batched | 100 % | 3.10 cm | 2.81 cm | 0 |" in row
     assert "over 10 seeds" in text
+    card["training"].update(n_envs=32, vector="subprocess", n_workers=2)
+    (tmp_path / "wall_sweep" / "model_card.json").write_text(json.dumps(card))
+    assert "| 6,700 | 32 in 2 processes | 100 % |" in agents_table(tmp_path)
 
 
 def _python_block_after(heading: str) -> str:

@@ -30,7 +30,9 @@ _BASE_NAMES = {"scmpc": "SC-MPC", "pid": "PID"}
 
 def _envs(training: dict) -> str:
     """How a card's envs ran: ``"256 batched"`` or ``"32 in 2 processes"``."""
-    n = training.get("n_envs", "?")
+    n = training.get("n_envs")
+    if n is None:
+        return "-"
     if training.get("vector") == "batched":
         return f"{n} batched"
     workers = training.get("n_workers", 0)
