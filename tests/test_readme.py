@@ -40,6 +40,11 @@ def test_model_cards_become_one_row_each(tmp_path):
     row = [line for line in text.splitlines() if "WallSweep-v0" in line][0]
     assert "| 10,000,000 | 25.0 min | 6,700 | 100 % | 3.10 cm | 2.81 cm | 0 |" in row
     assert "over 10 seeds" in text
+    assert "warm-started" not in row
+    card["training"]["warm_start"] = {"controller": "scmpc"}
+    (tmp_path / "wall_sweep" / "model_card.json").write_text(json.dumps(card))
+    row = [line for line in agents_table(tmp_path).splitlines() if "WallSweep-v0" in line][0]
+    assert row.startswith("| [`WallSweep-v0`, warm-started from SC-MPC demonstrations](")
 
 
 def _python_block_after(heading: str) -> str:
