@@ -10,7 +10,8 @@ function the comparison tables take.
 Modules: :mod:`agents.config` (per-task YAML in ``agents/configs/``),
 :mod:`agents.envs` (environments from a configuration), :mod:`agents.vec_env`
 (several environments per worker process), :mod:`agents.residual` (corrections on
-top of PID / SC-MPC), :mod:`agents.callbacks`, :mod:`agents.checkpoints` (files,
+top of PID / SC-MPC), :mod:`agents.demonstrations` and :mod:`agents.behaviour_cloning` (a controller's
+flight recorded and cloned into PPO before training: ``--warm-start``), :mod:`agents.callbacks`, :mod:`agents.checkpoints` (files,
 model cards), :mod:`agents.evaluate`, :mod:`agents.policy`, :mod:`agents.train`.
 Importing this package does not import PyTorch; loading a policy does.
 """

@@ -319,6 +319,8 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
          training.get("command_wall_time_s")),
         ("environments / worker processes", f"{training.get('n_envs')} / {training.get('n_workers')}"),
         ("residual base controller", card.get("residual") or "none"),
+        *((("warm start (behaviour cloning, included in the wall-clock time)", _warm_start_text(training["warm_start"])),)
+          if training.get("warm_start") else ()),
         ("domain randomisation", card.get("randomize") or "off"),
         ("seed", training.get("seed")),
         ("machine", training.get("machine")),
@@ -334,6 +336,14 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
     lines += ["", "Hyperparameters and every other setting: `model_card.json` (`config`).", ""]
     md_path.write_text("\n".join(lines))
     return json_path, md_path
+
+
+def _warm_start_text(warm: dict[str, Any]) -> str:
+    cloning = warm.get("cloning", {})
+    return (f"{warm.get('controller')} flew {warm.get('demo_env_steps')} env steps of demonstrations in "
+            f"{warm.get('demo_wall_time_s')} s; cloned in {cloning.get('wall_time_s')} s ({cloning.get('epochs')} epochs, "
+            f"RMS action error on held-out flights {cloning.get('heldout_action_rmse')}); PPO then "
+            f"{warm.get('ppo_wall_time_s')} s")
 
 
 def _jsonable(value: Any) -> Any:

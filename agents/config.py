@@ -45,8 +45,8 @@ _BASE: dict[str, Any] = {
     "randomize_ranges": {},
     "residual": None,  # None, "pid" or "scmpc": learn a correction on top of that controller
     "residual_scale": [0.2, 0.2, 0.2, 0.2],  # largest correction per normalised action entry
-    # keywords for each base controller's from_env: SC-MPC is given the paper's identified
-    # suction model (it is the controller's knowledge, not the simulator's truth)
+    # keywords for each base controller's from_env (residual base, or demonstrator of warm_start):
+    # SC-MPC is given the paper's identified suction model (it is the controller's knowledge, not the simulator's truth)
     "residual_base_kwargs": {"pid": {"preset": "tuned"},
                              # threads: SC-MPC solves a batched env's rows on both cores during rollouts;
                              # solver: one LM iteration per control step from the shifted previous
@@ -55,6 +55,15 @@ _BASE: dict[str, Any] = {
                              # wall-normal RMSE either way over seeds 100-109
                              "scmpc": {"k_s": 4.1, "d_thr": 0.132, "preset": "tuned", "threads": 2,
                                        "solver": {"max_iterations": 1}}},
+    # warm start (agents.behaviour_cloning): before PPO, a controller (None, "pid" or "scmpc"; built with
+    # residual_base_kwargs) flies demo_envs batched envs for demo_steps steps each, acting with its action
+    # plus Gaussian noise (std spread over the envs from 0 to noise, normalised units) but recording its
+    # clean action; the actor is cloned on those actions and the critic on their returns for epochs
+    # passes (minibatches of batch_size, Adam at learning_rate, cosine decay), normaliser fitted to them.
+    # Demonstration env k flies seed warm_start.seed + seed * demo_envs + k: seeds of their own, away from
+    # the model card's (card_eval.seed up) and the evaluations' (eval.seed up)
+    "warm_start": {"controller": None, "demo_envs": 128, "demo_steps": 1700, "noise": 0.1, "epochs": 20,
+                   "batch_size": 1024, "learning_rate": 1.0e-3, "seed": 1_000_000},
     "timesteps": 1_000_000,
     "seed": 0,
     "n_envs": 32,  # environments in the vector env (16 per worker: IPC and SB3 overhead amortised)
@@ -232,6 +241,18 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
     if not (isinstance(scale, (list, tuple)) and len(scale) == 4
             and all(isinstance(s, (int, float)) and not isinstance(s, bool) and 0.0 < s <= 2.0 for s in scale)):
         raise ValueError(f"residual_scale must be 4 numbers in (0, 2], got {scale!r}")
+    warm = config["warm_start"]
+    if warm["controller"] not in _RESIDUAL_BASES:
+        raise ValueError(f"warm_start.controller must be one of {_RESIDUAL_BASES}, got {warm['controller']!r}")
+    if warm["controller"] and config["residual"]:
+        raise ValueError("warm_start clones a controller into a policy that flies the task itself; a residual agent "
+                         f"(residual: {config['residual']}) already starts from its base controller: use one or the other")
+    for key in ("demo_envs", "demo_steps", "epochs", "batch_size"):
+        positive_int(f"warm_start.{key}", warm[key])
+    number("warm_start.noise", warm["noise"], 0.0, 1.0)
+    number("warm_start.learning_rate", warm["learning_rate"], 0.0, low_open=True)
+    if isinstance(warm["seed"], bool) or not isinstance(warm["seed"], int) or warm["seed"] < 0:
+        raise ValueError(f"warm_start.seed must be a whole number >= 0, got {warm['seed']!r}")
     base_kwargs = config["residual_base_kwargs"]
     if not (isinstance(base_kwargs, dict) and all(isinstance(v, dict) or v is None for v in base_kwargs.values())):
         raise ValueError(f"residual_base_kwargs must map a base controller to its keywords, got {base_kwargs!r}")

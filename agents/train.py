@@ -107,6 +107,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="domain randomisation of k_s, d_thr, stand-off and mass (ranges from the config)")
     parser.add_argument("--residual", choices=["none", "pid", "scmpc"],
                         help="learn a correction on top of this base controller (default: config, none)")
+    parser.add_argument("--warm-start", choices=["none", "pid", "scmpc"],
+                        help="before PPO, clone this controller's demonstrations into the policy (behaviour cloning; "
+                             "settings: warm_start.* in the config; default: config, none)")
     parser.add_argument("--eval-freq", type=int, help="env steps between evaluations (default: config)")
     parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: config)")
     parser.add_argument("--checkpoint-freq", type=int, help="env steps between checkpoints, 0 = none (default: config)")
@@ -141,6 +144,8 @@ def _config_from_args(args: argparse.Namespace) -> dict[str, Any]:
     for key, value in flags.items():
         if value is not None or (key == "residual" and args.residual == "none"):
             config[key] = value
+    if args.warm_start is not None:
+        config["warm_start"]["controller"] = None if args.warm_start == "none" else args.warm_start
     if args.eval_freq is not None:
         config["eval"]["freq"] = args.eval_freq
     if args.eval_episodes is not None:
@@ -179,6 +184,8 @@ def _command(args: argparse.Namespace, config: dict[str, Any]) -> str:
         parts.append("--randomize" if config["randomize"] else "--no-randomize")  # explicit: some tasks default to on
         if config["residual"]:
             parts += ["--residual", config["residual"]]
+        if config["warm_start"]["controller"]:
+            parts += ["--warm-start", config["warm_start"]["controller"]]
         if args.eval_freq is not None:
             parts += ["--eval-freq", str(args.eval_freq)]
         if args.eval_episodes is not None:
@@ -348,10 +355,12 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
 
     venv = make_vec_env(config, config["n_envs"], config["n_workers"], vector=vector_kind(config))
     eval_env = None
+    warm: dict[str, Any] | None = None
     try:
         train_env = VecNormalize(venv, norm_obs=norm["norm_obs"], norm_reward=norm["norm_reward"],
                                  clip_obs=float(norm["clip_obs"]), clip_reward=float(norm["clip_reward"]),
                                  gamma=float(config["ppo"]["gamma"]))
+        clock = TrainingClock(previous_wall)  # a warm start's demonstrations and cloning count as training time
         if resume:
             train_env.obs_rms, train_env.ret_rms = saved_normalizer.obs_rms, saved_normalizer.ret_rms
             model.set_env(train_env)
@@ -359,6 +368,8 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
             print(f"resuming from {source} at {start_steps} timesteps", file=sys.stderr)
         else:
             model = _make_ppo(config, train_env, out / "tb", verbose)
+            if config["warm_start"]["controller"]:
+                warm = warm_start_from_controller(config, model, train_env, verbose=verbose)
 
         # the same wrappers as the training env (sync_envs_normalization walks both stacks); one env
         # per evaluation episode (up to 32), so an evaluation flies its episodes side by side
@@ -366,7 +377,6 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         eval_env = VecNormalize(make_vec_env(config, eval_envs, 0, vector=vector_kind(config)), training=False,
                                 norm_obs=norm["norm_obs"], norm_reward=False, clip_obs=float(norm["clip_obs"]))
         eval_env.seed(int(config["eval"]["seed"]))
-        clock = TrainingClock(previous_wall)
         best = SaveBestCheckpoint(out / "best", description, clock, checks)
         evaluation = EvalCallback(eval_env, callback_on_new_best=best, n_eval_episodes=int(config["eval"]["episodes"]),
                                   eval_freq=max(int(config["eval"]["freq"]) // config["n_envs"], 1),
@@ -380,6 +390,10 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                 evaluation.evaluations_length = [list(n) for n in history["ep_lengths"]]
         from agents.timing import TimeSplit
 
+        if warm is not None:  # the cloned policy is the first candidate for best/: PPO has to beat it
+            warm["eval_mean_return"] = _evaluate_as_best(model, train_env, evaluation, out / "best",
+                                                         _policy_info_now(description, model, clock), checks)
+        ppo_started = time.perf_counter()
         time_split = TimeSplit(venv)  # wrappers pass step_time_s on from the env (and a residual's base) that count it
         periodic = PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks,
                                       every_s=60.0 * float(config["checkpoint_minutes"]), on_save=on_checkpoint)
@@ -393,6 +407,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         except KeyboardInterrupt:
             saved = periodic.save()  # model, statistics, step count and wall time: all --resume needs
             raise TrainingInterrupted(out, saved, int(model.num_timesteps)) from None
+        ppo_time = time.perf_counter() - ppo_started
         run_time = clock.this_run_s
         total_time = clock.total_s
         save_checkpoint(out, model, train_env, {**description, "num_timesteps": int(model.num_timesteps),
@@ -415,6 +430,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         "total_wall_time_s": round(total_time, 2),
         "steps_per_s": round(steps_this_run / max(run_time, 1e-9), 1),
         "time_split": time_split.split(),
+        **({"warm_start": {**warm, "ppo_wall_time_s": round(ppo_time, 2)}} if warm is not None else {}),
         "n_envs": config["n_envs"],
         "vector": vector_kind(config),
         "n_workers": config["n_workers"] if vector_kind(config) == "subprocess" else 0,
@@ -436,6 +452,65 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     return TrainingRun(card, model, train_env, out)
 
 
+def warm_start_from_controller(config: dict[str, Any], model: Any, normalizer: Any, verbose: int = 1) -> dict[str, Any]:
+    """Warm-start ``model`` (and ``normalizer``, its training ``VecNormalize``) from demonstrations of
+    ``config["warm_start"]["controller"]`` (see :mod:`agents.behaviour_cloning`); the report for the card."""
+    from agents.behaviour_cloning import warm_start
+    from agents.demonstrations import record_demonstrations
+    from agents.envs import make_vec_env
+    from agents.residual import make_base_controller
+
+    settings = config["warm_start"]
+    name = settings["controller"]
+    demo_venv = make_vec_env(config, int(settings["demo_envs"]), vector="batched")
+    try:
+        controller = make_base_controller(name, demo_venv, **dict(config["residual_base_kwargs"].get(name) or {}))
+        first_seed = int(settings["seed"]) + int(config["seed"]) * int(settings["demo_envs"])
+        demos = record_demonstrations(demo_venv, controller, int(settings["demo_steps"]), noise=float(settings["noise"]),
+                                      seed=first_seed)
+    finally:
+        demo_venv.close()
+    if verbose:
+        print(f"warm start: {name} flew {demos.n_samples} env steps of demonstrations in {demos.wall_time_s:.1f} s",
+              file=sys.stderr)
+    cloning = warm_start(model, normalizer, demos, epochs=int(settings["epochs"]),
+                         batch_size=int(settings["batch_size"]), learning_rate=float(settings["learning_rate"]),
+                         seed=int(config["seed"]))
+    if verbose:
+        print(f"warm start: cloned in {cloning['wall_time_s']:.1f} s, RMS action error on held-out flights "
+              f"{cloning.get('heldout_action_rmse', float('nan')):.4f}", file=sys.stderr)
+    return {"controller": name, "demo_seeds": [first_seed, first_seed + int(settings["demo_envs"]) - 1],
+            "demo_env_steps": demos.n_samples, "demo_wall_time_s": round(demos.wall_time_s, 2),
+            "demo_steps_per_s": round(demos.n_samples / max(demos.wall_time_s, 1e-9), 1),
+            "controller_failures": int(getattr(controller, "failures", 0)), "cloning": cloning}
+
+
+def _policy_info_now(description: dict[str, Any], model: Any, clock: Any) -> dict[str, Any]:
+    return {**description, "num_timesteps": int(model.num_timesteps), "wall_time_s": round(clock.total_s, 3)}
+
+
+def _evaluate_as_best(model: Any, train_env: Any, evaluation: Any, folder: Path, info: dict[str, Any],
+                      checks: np.ndarray) -> float:
+    """Evaluate ``model`` as ``evaluation`` (an ``EvalCallback``) would, record it in its history and save it
+    as the best checkpoint so far; its mean return."""
+    from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.vec_env import sync_envs_normalization
+
+    from agents.checkpoints import save_checkpoint
+
+    sync_envs_normalization(train_env, evaluation.eval_env)
+    returns, lengths = evaluate_policy(model, evaluation.eval_env, n_eval_episodes=evaluation.n_eval_episodes,
+                                       deterministic=True, return_episode_rewards=True)
+    assert isinstance(returns, list) and isinstance(lengths, list)  # per-episode lists with return_episode_rewards
+    mean = float(np.mean(returns))
+    evaluation.evaluations_timesteps.append(int(model.num_timesteps))
+    evaluation.evaluations_results.append([float(r) for r in returns])
+    evaluation.evaluations_length.append([int(n) for n in lengths])
+    evaluation.best_mean_reward = max(float(evaluation.best_mean_reward), mean)
+    save_checkpoint(folder, model, train_env, {**info, "eval_mean_return": mean}, checks)
+    return mean
+
+
 def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None, training: dict[str, Any]) -> dict[str, Any]:
     """Evaluate ``checkpoint`` on the task's nominal settings and assemble the model card."""
     from agents.envs import env_kwargs
@@ -450,7 +525,9 @@ def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None,
         "env_id": config["env_id"],
         "summary": ("PPO (Stable-Baselines3, MLP " + "x".join(map(str, config["policy"]["net_arch"])) + ") "
                     + (f"learning a residual correction on top of {config['residual']}" if config["residual"]
-                       else "flying the task directly (collective thrust and body rates)") + "."),
+                       else "flying the task directly (collective thrust and body rates)")
+                    + (f", warm-started by behaviour cloning of {config['warm_start']['controller']}"
+                       if config["warm_start"]["controller"] else "") + "."),
         "command": command or "(trained through the Python API: agents.train.train)",
         "checkpoint": f"{checkpoint.name}/ at {info.get('num_timesteps')} timesteps " + (
             f"(best mean evaluation return {info['eval_mean_return']:.1f})"
@@ -472,13 +549,18 @@ def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None,
     }
 
 
-def ship(run_dir: Path, task: str, residual: str | None = None) -> Path:
+def ship(run_dir: Path, task: str, residual: str | None = None, warm_start: str | None = None) -> Path:
     """Copy ``run_dir/best`` and the run's model card into ``agents/pretrained/<task>/``
-    (``<task>_residual_<base>/`` for a residual agent, where ``policy_factory(variant=...)`` looks)."""
+    (``<task>_residual_<base>/`` for a residual agent, ``<task>_warm_start_<controller>/`` for one
+    started from a controller's demonstrations, where ``policy_factory(variant=...)`` looks).
+
+    A warm-started agent has its own folder: it learned from the controller it is compared with,
+    so it never takes the place of the agent that learned the task alone (the comparison's PPO)."""
     from agents.checkpoints import copy_checkpoint
     from agents.policy import pretrained_path
 
-    target = pretrained_path(task, f"residual_{residual}" if residual else "")
+    variant = f"residual_{residual}" if residual else f"warm_start_{warm_start}" if warm_start else ""
+    target = pretrained_path(task, variant)
     copy_checkpoint(run_dir / "best", target)
     for name in ("model_card.json", "model_card.md"):
         (target / name).write_bytes((run_dir / name).read_bytes())
@@ -504,7 +586,8 @@ def _resumed_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
         raise ValueError(f"cannot resume: {run_dir / 'config.yaml'} does not exist")
     changing = [flag for flag, value in (("--env", args.env), ("--config", args.config), ("--n-envs", args.n_envs),
                                          ("--seed", args.seed), ("--randomize", args.randomize),
-                                         ("--residual", args.residual), ("--set", args.set or None),
+                                         ("--residual", args.residual), ("--warm-start", args.warm_start),
+                                         ("--set", args.set or None),
                                          ("--out", args.out)) if value is not None]
     if changing:
         raise ValueError(f"--resume continues the saved configuration; drop {', '.join(changing)}")
@@ -565,6 +648,6 @@ def run(args: argparse.Namespace) -> int:
           f"collisions {m['collisions']}")
     print(f"model card: {out / 'model_card.md'}")
     if args.ship:
-        target = ship(out, config["env_id"], config["residual"])
+        target = ship(out, config["env_id"], config["residual"], config["warm_start"]["controller"])
         print(f"shipped to {target}")
     return 0

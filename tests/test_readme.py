@@ -44,6 +44,11 @@ def test_model_cards_become_one_row_each(tmp_path):
     card["training"].update(n_envs=32, vector="subprocess", n_workers=2)
     (tmp_path / "wall_sweep" / "model_card.json").write_text(json.dumps(card))
     assert "| 6,700 | 32 in 2 processes | 100 % |" in agents_table(tmp_path)
+    assert "warm-started" not in row
+    card["training"]["warm_start"] = {"controller": "scmpc"}
+    (tmp_path / "wall_sweep" / "model_card.json").write_text(json.dumps(card))
+    row = [line for line in agents_table(tmp_path).splitlines() if "WallSweep-v0" in line][0]
+    assert row.startswith("| [`WallSweep-v0`, warm-started from SC-MPC demonstrations](")
 
 
 def _python_block_after(heading: str) -> str:

@@ -226,7 +226,8 @@ def plan(args: argparse.Namespace) -> int:
         try:
             training = json.loads(Path(args.trial_card).read_text())["training"]
             trial_minutes = float(training["total_wall_time_s"]) / 60
-            trial_steps = int(training["total_timesteps"])
+            # a warm start's demonstrations are env steps of the run too
+            trial_steps = int(training["total_timesteps"]) + int((training.get("warm_start") or {}).get("demo_env_steps", 0))
         except (OSError, ValueError, KeyError, TypeError):
             raise SystemExit(f"--trial-card {args.trial_card}: not a model card (training.total_wall_time_s)") from None
     lines = [f"| machines | CPUs | all flights of `compare` (min) | the same, one flight at a time per machine (min) | "

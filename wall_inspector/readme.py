@@ -54,6 +54,9 @@ def agents_table(pretrained: Path) -> str:
         name = f"`{card['env_id'].split('/')[-1]}`"
         if card.get("residual"):
             name += f", residual on {_BASE_NAMES.get(card['residual'], card['residual'])}"
+        warm = (t.get("warm_start") or {}).get("controller")
+        if warm:
+            name += f", warm-started from {_BASE_NAMES.get(warm, warm)} demonstrations"
         lines.append(
             f"| [{name}]({card_path.parent.as_posix()}/model_card.md) | {t['total_timesteps']:,} | "
             f"{t['total_wall_time_s'] / 60:.1f} min | {t['steps_per_s']:,.0f} | {_envs(t)} | {100 * m['completed']:.0f} % | "
