@@ -195,14 +195,21 @@ def test_ctrl_c_saves_everything_and_resume_goes_on_from_the_same_step(tmp_path)
                "--n-envs", "2", "--workers", "1", "--set", "ppo.n_steps=256", "--set", "ppo.batch_size=256",
                "--set", "ppo.n_epochs=1", "--eval-freq", "512", "--eval-episodes", "1", "--no-progress", "--quiet",
                "--out", str(out)]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    # faulthandler: a hang after Ctrl-C ends with every thread's stack on stderr (SIGABRT below)
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                               env={**os.environ, "PYTHONFAULTHANDLER": "1"})
     try:
         deadline = time.monotonic() + 120
         while not (out / "eval" / "evaluations.npz").exists():  # training is under way
             assert process.poll() is None and time.monotonic() < deadline, process.communicate()
             time.sleep(0.1)
         os.killpg(process.pid, signal.SIGINT)
-        _, err = process.communicate(timeout=180)  # saving under a heavily loaded machine can be slow
+        try:
+            _, err = process.communicate(timeout=180)  # saving under a heavily loaded machine can be slow
+        except subprocess.TimeoutExpired:
+            process.send_signal(signal.SIGABRT)
+            _, err = process.communicate(timeout=60)
+            pytest.fail(f"no exit within 180 s of Ctrl-C; the stacks at that moment:\n{err}")
     finally:
         if process.poll() is None:
             process.kill()
