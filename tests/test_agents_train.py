@@ -195,9 +195,13 @@ def test_ctrl_c_saves_everything_and_resume_goes_on_from_the_same_step(tmp_path)
                "--n-envs", "2", "--workers", "1", "--set", "ppo.n_steps=256", "--set", "ppo.batch_size=256",
                "--set", "ppo.n_epochs=1", "--eval-freq", "512", "--eval-episodes", "1", "--no-progress", "--quiet",
                "--out", str(out)]
-    # faulthandler: a hang after Ctrl-C ends with every thread's stack on stderr (SIGABRT below)
+    # The child gets SIGINT's default disposition, as a terminal's foreground job has: a test run started
+    # in the background by a non-interactive shell inherits SIGINT ignored, and Python then never turns
+    # Ctrl-C into KeyboardInterrupt. faulthandler: a hang after Ctrl-C ends with every thread's stack
+    # on stderr (SIGABRT below).
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                               env={**os.environ, "PYTHONFAULTHANDLER": "1"})
+                               env={**os.environ, "PYTHONFAULTHANDLER": "1"},
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 120
         while not (out / "eval" / "evaluations.npz").exists():  # training is under way
