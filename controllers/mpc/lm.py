@@ -371,8 +371,10 @@ class LMSettings:
     def coerce(cls, value: LMSettings | dict[str, Any] | None) -> LMSettings:
         """``value`` as settings: ``None`` gives the defaults, a mapping (from a YAML configuration,
         e.g. ``{"max_iterations": 1}``) replaces the named defaults."""
-        if value is None or isinstance(value, cls):
-            return value if value is not None else cls()
+        if value is None:
+            return cls()
+        if isinstance(value, cls):
+            return value
         if not isinstance(value, dict):
             raise ValueError(f"solver must be LMSettings or a mapping of its fields, got {type(value).__name__}")
         allowed = [f.name for f in fields(cls)]
