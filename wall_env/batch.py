@@ -75,6 +75,7 @@ class EnvBatch:
         cfg = config
         geometry = cfg.geometry
         scene, reference = cfg.build()
+        self.configured = (scene, reference)  # the configured scene and reference (each episode's may differ)
         self.simulator = BatchSimulator(cfg.vehicle, cfg.truth, scene.structure, cfg.control_dt,
                                         cfg.physics_substeps, n)
         self.streams = RandomStreams(n)

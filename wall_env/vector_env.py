@@ -89,7 +89,6 @@ class WallInspectorVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.batch = EnvBatch(self.config, self.num_envs)
-        self._configured = self.config.build()
         self._all = np.arange(self.num_envs)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
         self._seeded = False
@@ -118,19 +117,19 @@ class WallInspectorVectorEnv(VectorEnv):
     @property
     def scene(self):
         """The configured scene (each env's current one: :meth:`scene_and_reference`)."""
-        return self._configured[0]
+        return self.batch.configured[0]
 
     @property
     def reference(self):
         """The configured reference (each env's current one: :meth:`scene_and_reference`)."""
-        return self._configured[1]
+        return self.batch.configured[1]
 
     def scene_and_reference(self, index: int):
         """Scene and reference of env ``index``'s current episode, as the single env rebuilds them at
         its reset (a randomised stand-off moves both); what controllers read at episode starts."""
         standoff = self.batch.episode_parameters.get("standoff")
         if standoff is None:
-            return self._configured
+            return self.batch.configured
         return self.config.build(float(standoff[index]))
 
     @property
