@@ -33,6 +33,7 @@ __all__ = [
     "apply_overrides",
     "validate_config",
     "save_config",
+    "base_controller_kwargs",
 ]
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
@@ -280,6 +281,12 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(config["randomize"], bool):
         raise ValueError(f"randomize must be true or false, got {config['randomize']!r}")
     return config
+
+
+def base_controller_kwargs(config: dict[str, Any], name: str) -> dict[str, Any]:
+    """A copy of the configured ``from_env`` keywords of controller ``name`` (``"pid"``, ``"scmpc"``): a
+    residual agent's base or a warm start's demonstrator."""
+    return dict(config["residual_base_kwargs"].get(name) or {})
 
 
 def save_config(config: dict[str, Any], path: str | Path) -> None:

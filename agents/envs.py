@@ -24,6 +24,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor
 
 import wall_env  # noqa: F401  (registers the WallInspector tasks)
+from agents.config import base_controller_kwargs
 from agents.residual import ResidualActionWrapper, ResidualVecEnv, make_base_controller
 from agents.vec_env import MultiEnvSubprocVecEnv
 
@@ -52,7 +53,7 @@ def make_env(config: dict[str, Any], randomize: bool | None = None, monitor: boo
         raise ValueError(f"env_kwargs for {config['env_id']}: {reason}") from exc
     if config["residual"]:
         name = config["residual"]
-        base_kwargs = dict(config["residual_base_kwargs"].get(name) or {})
+        base_kwargs = base_controller_kwargs(config, name)
         env = ResidualActionWrapper(env, lambda e: make_base_controller(name, e, **base_kwargs),
                                     scale=config["residual_scale"])
     if monitor:
@@ -84,8 +85,8 @@ def make_vec_env(config: dict[str, Any], n_envs: int, n_workers: int = 0, random
                                      **env_kwargs(config, randomize))
         if config["residual"]:
             name = config["residual"]
-            base_kwargs = dict(config["residual_base_kwargs"].get(name) or {})
-            venv = ResidualVecEnv(venv, make_base_controller(name, venv, **base_kwargs), scale=config["residual_scale"])
+            venv = ResidualVecEnv(venv, make_base_controller(name, venv, **base_controller_kwargs(config, name)),
+                                  scale=config["residual_scale"])
         return VecMonitor(venv, info_keywords=MONITOR_INFO_KEYS)
     fns = [env_factory(config, randomize) for _ in range(n_envs)]
     if n_workers <= 0:

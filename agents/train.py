@@ -59,6 +59,7 @@ import numpy as np
 
 from agents.config import (
     apply_overrides,
+    base_controller_kwargs,
     default_config,
     load_config,
     save_config,
@@ -213,7 +214,7 @@ def policy_description(config: dict[str, Any]) -> dict[str, Any]:
     residual = None
     if config["residual"]:
         residual = {"base": config["residual"], "scale": [float(s) for s in config["residual_scale"]],
-                    "base_kwargs": dict(config["residual_base_kwargs"].get(config["residual"]) or {})}
+                    "base_kwargs": base_controller_kwargs(config, config["residual"])}
     return {"env_id": config["env_id"], "algorithm": "PPO", "residual": residual}
 
 
@@ -464,7 +465,7 @@ def warm_start_from_controller(config: dict[str, Any], model: Any, normalizer: A
     name = settings["controller"]
     demo_venv = make_vec_env(config, int(settings["demo_envs"]), vector="batched")
     try:
-        controller = make_base_controller(name, demo_venv, **dict(config["residual_base_kwargs"].get(name) or {}))
+        controller = make_base_controller(name, demo_venv, **base_controller_kwargs(config, name))
         first_seed = int(settings["seed"]) + int(config["seed"]) * int(settings["demo_envs"])
         demos = record_demonstrations(demo_venv, controller, int(settings["demo_steps"]), noise=float(settings["noise"]),
                                       seed=first_seed)
