@@ -80,6 +80,9 @@ _BASE: dict[str, Any] = {
         "gamma": 0.99,  # horizon ~1 s at 100 Hz: tracking errors matter within a second
         "gae_lambda": 0.95,
         "learning_rate": 3.0e-4,
+        # None: constant; a number: the learning rate falls linearly from learning_rate to this
+        # value over the run's planned timesteps (SB3's LinearSchedule)
+        "learning_rate_final": None,
         "clip_range": 0.2,
         "ent_coef": 0.0,
         "vf_coef": 0.5,
@@ -214,6 +217,8 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
     number("ppo.gamma", ppo["gamma"], 0.0, 1.0, low_open=True)
     number("ppo.gae_lambda", ppo["gae_lambda"], 0.0, 1.0)
     number("ppo.learning_rate", ppo["learning_rate"], 0.0, low_open=True)
+    if ppo["learning_rate_final"] is not None:
+        number("ppo.learning_rate_final", ppo["learning_rate_final"], 0.0, ppo["learning_rate"])
     for key in ("clip_range", "max_grad_norm"):
         number(f"ppo.{key}", ppo[key], 0.0, low_open=True)
     for key in ("ent_coef", "vf_coef"):

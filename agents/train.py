@@ -276,12 +276,16 @@ def _latest_checkpoint(run_dir: Path) -> Path:
 def _make_ppo(config: dict[str, Any], env: Any, tb_dir: Path, verbose: int) -> Any:
     import torch
     from stable_baselines3 import PPO
+    from stable_baselines3.common.utils import LinearSchedule
 
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU}[config["policy"]["activation"]]
     arch = list(config["policy"]["net_arch"])
     policy_kwargs = {"net_arch": {"pi": arch, "vf": arch}, "activation_fn": activation,
                      "log_std_init": float(config["policy"]["log_std_init"]), "ortho_init": bool(config["policy"]["ortho_init"])}
     ppo = dict(config["ppo"])
+    final = ppo.pop("learning_rate_final")
+    if final is not None:  # progress runs over the planned timesteps, resumed runs included
+        ppo["learning_rate"] = LinearSchedule(float(ppo["learning_rate"]), float(final), 1.0)
     return PPO("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=config["seed"], tensorboard_log=str(tb_dir),
                device="cpu", verbose=verbose, **ppo)
 

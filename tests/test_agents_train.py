@@ -13,7 +13,8 @@ import yaml
 
 import wall_env  # noqa: F401
 from agents import TrainedPolicy, load_policy, policy_factory
-from agents.config import default_config
+from agents.checkpoints import load_model
+from agents.config import default_config, validate_config
 from agents.evaluate import evaluate_agent
 from agents.train import train
 from wall_inspector.cli import main
@@ -265,3 +266,27 @@ def test_resumed_run_is_not_shipped_from_a_dirty_tree_either(cli_run, monkeypatc
     assert main(["train", "--resume", str(cli_run), "--timesteps", "9216", "--ship"]) == 2
     assert "wall_env/env.py differ from it; commit first" in capsys.readouterr().err
     assert sorted(p.name for p in cli_run.rglob("*")) == before  # nothing trained, nothing written
+
+
+def test_learning_rate_falls_linearly_to_its_final_value_over_the_planned_steps(tmp_path):
+    config = default_config("WallHover")
+    config.update(timesteps=2048, n_envs=2, n_workers=1, checkpoint_freq=0, checkpoint_minutes=0.0)
+    config["ppo"].update(n_steps=256, batch_size=256, n_epochs=1, learning_rate=1.0e-3, learning_rate_final=1.0e-4)
+    config["eval"].update(freq=100_000, episodes=1)
+    config["card_eval"]["episodes"] = 1
+    trained = train(config, tmp_path / "hover", progress_bar=False, verbose=0)
+    # SB3 gives the schedule the share of the planned steps still to go: 1 at the start, 0 at the end
+    schedule = trained.model.lr_schedule
+    assert [schedule(f) for f in (1.0, 0.5, 0.0)] == pytest.approx([1.0e-3, 5.5e-4, 1.0e-4])
+    # the last of the four updates (after 2048 of 2048 steps) ran at the final rate
+    assert trained.model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(1.0e-4)
+    # the schedule is saved with the model, so a resumed run goes on along it
+    loaded, _, _ = load_model(tmp_path / "hover")
+    assert loaded.lr_schedule(0.25) == pytest.approx(3.25e-4)
+
+
+def test_final_learning_rate_above_the_initial_one_is_refused():
+    config = default_config("WallHover")
+    config["ppo"].update(learning_rate=1.0e-3, learning_rate_final=2.0e-3)
+    with pytest.raises(ValueError, match=r"ppo.learning_rate_final must be in \[0.0, 0.001\], got 0.002"):
+        validate_config(config)
