@@ -18,7 +18,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.checkpoints import save_checkpoint
 
-__all__ = ["ProgressBar", "PeriodicCheckpoint", "SaveBestCheckpoint", "TrainingClock", "CollisionLog"]
+__all__ = ["ProgressBar", "PeriodicCheckpoint", "SaveBestCheckpoint", "TrainingClock", "CollisionLog", "TorchThreads"]
 
 
 class TrainingClock:
@@ -139,3 +139,26 @@ class CollisionLog(BaseCallback):
         if counts:
             self.logger.record("rollout/collisions_per_episode", float(np.mean(counts)))
             self.logger.record("rollout/collision_episode_fraction", float(np.mean(np.asarray(counts) > 0)))
+
+
+class TorchThreads(BaseCallback):
+    """PyTorch runs on ``rollout`` threads while rollouts are collected (the policy acting on one
+    observation per env, evaluations included) and on ``update`` threads for PPO's updates
+    (minibatches of ``batch_size``)."""
+
+    def __init__(self, rollout: int, update: int):
+        super().__init__()
+        self.rollout, self.update = int(rollout), int(update)
+
+    def _on_rollout_start(self) -> None:
+        import torch
+
+        torch.set_num_threads(self.rollout)
+
+    def _on_rollout_end(self) -> None:
+        import torch
+
+        torch.set_num_threads(self.update)
+
+    def _on_step(self) -> bool:
+        return True

@@ -72,7 +72,10 @@ _BASE: dict[str, Any] = {
     # "batched": every env in one batched env in the learner's process (one compiled call per step);
     # "subprocess": n_envs single envs in n_workers processes.
     "vector": "batched",
-    "torch_threads": 1,  # PyTorch threads in the learner process
+    "torch_threads": 1,  # PyTorch threads of PPO's updates (and of a warm start's cloning)
+    # PyTorch threads while rollouts are collected: the policy then acts on n_envs observations at
+    # a time, which below a few hundred rows runs faster on one thread than split over two
+    "rollout_torch_threads": 1,
     "ppo": {
         "n_steps": 128,  # per environment per rollout: n_envs * n_steps = 4096 transitions per update
         "batch_size": 1024,
@@ -199,7 +202,7 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
             raise ValueError(f"{name} must be in {'(' if low_open else '['}{low}, {high}], got {value!r}")
         return float(value)
 
-    for key in ("timesteps", "n_envs", "n_workers", "torch_threads"):
+    for key in ("timesteps", "n_envs", "n_workers", "torch_threads", "rollout_torch_threads"):
         positive_int(key, config[key])
     if isinstance(config["checkpoint_freq"], bool) or not isinstance(config["checkpoint_freq"], int) \
             or config["checkpoint_freq"] < 0:

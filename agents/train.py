@@ -50,7 +50,8 @@ import shlex
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -280,14 +281,32 @@ def _make_ppo(config: dict[str, Any], env: Any, tb_dir: Path, verbose: int) -> A
 
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU}[config["policy"]["activation"]]
     arch = list(config["policy"]["net_arch"])
+    # SB3's Adam (eps 1e-5) with PyTorch's fused CPU kernel: one call updates every tensor, a quarter
+    # cheaper per gradient step than the default loop over the tensors, the same algorithm
     policy_kwargs = {"net_arch": {"pi": arch, "vf": arch}, "activation_fn": activation,
-                     "log_std_init": float(config["policy"]["log_std_init"]), "ortho_init": bool(config["policy"]["ortho_init"])}
+                     "log_std_init": float(config["policy"]["log_std_init"]), "ortho_init": bool(config["policy"]["ortho_init"]),
+                     "optimizer_kwargs": {"eps": 1e-5, "fused": True}}
     ppo = dict(config["ppo"])
     final = ppo.pop("learning_rate_final")
     if final is not None:  # progress runs over the planned timesteps, resumed runs included
         ppo["learning_rate"] = LinearSchedule(float(ppo["learning_rate"]), float(final), 1.0)
     return PPO("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=config["seed"], tensorboard_log=str(tb_dir),
                device="cpu", verbose=verbose, **ppo)
+
+
+@contextmanager
+def _unchecked_distributions() -> Iterator[None]:
+    """PyTorch's distributions without their argument checks, restored afterwards. The checks cost
+    about 50 us per policy call (a few per cent of training); a NaN action still stops the run,
+    as the env refuses actions that are not finite (:func:`wall_env.batch.check_actions`)."""
+    import torch
+
+    before = torch.distributions.Distribution._validate_args
+    torch.distributions.Distribution.set_default_validate_args(False)
+    try:
+        yield
+    finally:
+        torch.distributions.Distribution.set_default_validate_args(before)
 
 
 def _machine() -> str:
@@ -330,7 +349,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     from stable_baselines3.common.callbacks import CallbackList, EvalCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from agents.callbacks import CollisionLog, PeriodicCheckpoint, ProgressBar, SaveBestCheckpoint, TrainingClock
+    from agents.callbacks import CollisionLog, PeriodicCheckpoint, ProgressBar, SaveBestCheckpoint, TorchThreads, TrainingClock
     from agents.checkpoints import load_model, read_json, save_checkpoint, write_model_card
     from agents.envs import make_vec_env
 
@@ -402,13 +421,15 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         time_split = TimeSplit(venv)  # wrappers pass step_time_s on from the env (and a residual's base) that count it
         periodic = PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks,
                                       every_s=60.0 * float(config["checkpoint_minutes"]), on_save=on_checkpoint)
-        callbacks = [time_split, evaluation, CollisionLog(), periodic]
+        threads = TorchThreads(rollout=int(config["rollout_torch_threads"]), update=int(config["torch_threads"]))
+        callbacks = [threads, time_split, evaluation, CollisionLog(), periodic]
         if progress_bar:
             callbacks.append(ProgressBar(target_steps, initial=start_steps))
 
         try:
-            model.learn(total_timesteps=target_steps - start_steps, callback=CallbackList(callbacks),
-                        reset_num_timesteps=not resume, tb_log_name="ppo", progress_bar=False)
+            with _unchecked_distributions():
+                model.learn(total_timesteps=target_steps - start_steps, callback=CallbackList(callbacks),
+                            reset_num_timesteps=not resume, tb_log_name="ppo", progress_bar=False)
         except KeyboardInterrupt:
             saved = periodic.save()  # model, statistics, step count and wall time: all --resume needs
             raise TrainingInterrupted(out, saved, int(model.num_timesteps)) from None

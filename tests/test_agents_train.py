@@ -9,6 +9,7 @@ import re
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 import yaml
 
 import wall_env  # noqa: F401
@@ -274,7 +275,11 @@ def test_learning_rate_falls_linearly_to_its_final_value_over_the_planned_steps(
     config["ppo"].update(n_steps=256, batch_size=256, n_epochs=1, learning_rate=1.0e-3, learning_rate_final=1.0e-4)
     config["eval"].update(freq=100_000, episodes=1)
     config["card_eval"]["episodes"] = 1
+    checks_before = torch.distributions.Distribution._validate_args
     trained = train(config, tmp_path / "hover", progress_bar=False, verbose=0)
+    # distributions ran unchecked during learning only; Adam runs fused with SB3's eps
+    assert torch.distributions.Distribution._validate_args == checks_before
+    assert trained.model.policy.optimizer.defaults["fused"] and trained.model.policy.optimizer.defaults["eps"] == 1e-5
     # SB3 gives the schedule the share of the planned steps still to go: 1 at the start, 0 at the end
     schedule = trained.model.lr_schedule
     assert [schedule(f) for f in (1.0, 0.5, 0.0)] == pytest.approx([1.0e-3, 5.5e-4, 1.0e-4])
@@ -290,3 +295,17 @@ def test_final_learning_rate_above_the_initial_one_is_refused():
     config["ppo"].update(learning_rate=1.0e-3, learning_rate_final=2.0e-3)
     with pytest.raises(ValueError, match=r"ppo.learning_rate_final must be in \[0.0, 0.001\], got 0.002"):
         validate_config(config)
+
+
+def test_rollouts_and_updates_run_on_their_own_thread_counts():
+    from agents.callbacks import TorchThreads
+
+    before = torch.get_num_threads()
+    try:
+        threads = TorchThreads(rollout=1, update=2)
+        threads.on_rollout_start()
+        assert torch.get_num_threads() == 1
+        threads.on_rollout_end()
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)

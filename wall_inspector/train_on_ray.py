@@ -19,8 +19,8 @@ checkpoints.
 
 Resource hints: each trial reserves ``--cpus-per-trial`` CPUs (default
 :func:`cpus_per_run`: with ``--vector subprocess`` the run's ``n_workers``, the processes
-its environments step in; with the batched env, all in the learner's process, its
-``torch_threads``), so Ray never starts more runs on a node than its CPUs carry.
+its environments step in; with the batched env, all in the learner's process, the more of
+its ``torch_threads`` and ``rollout_torch_threads``), so Ray never starts more runs on a node than its CPUs carry.
 """
 
 from __future__ import annotations
@@ -107,12 +107,12 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 def cpus_per_run(config: dict[str, Any]) -> int:
     """The CPUs a training run keeps busy: its worker processes with ``vector: subprocess``, else (one batched
-    env in the learner's process) the learner's PyTorch threads."""
+    env in the learner's process) the learner's PyTorch threads (the more of updates and rollouts)."""
     from agents.train import vector_kind
 
     if vector_kind(config) == "subprocess":
         return max(1, int(config["n_workers"]))
-    return max(1, int(config["torch_threads"]))
+    return max(1, int(config["torch_threads"]), int(config["rollout_torch_threads"]))
 
 
 def _report_checkpoint(run_dir: Path, folder: Path | None, metrics: dict[str, Any]) -> None:
