@@ -281,8 +281,8 @@ def _make_ppo(config: dict[str, Any], env: Any, tb_dir: Path, verbose: int) -> A
 
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU}[config["policy"]["activation"]]
     arch = list(config["policy"]["net_arch"])
-    # SB3's Adam (eps 1e-5) with PyTorch's fused CPU kernel: one call updates every tensor, a quarter
-    # cheaper per gradient step than the default loop over the tensors, the same algorithm
+    # SB3's Adam (eps 1e-5) with PyTorch's fused CPU kernel: one call updates every tensor (the same
+    # algorithm; a gradient step of 1024 samples measured 3.3 ms against 4.5 ms with the default loop)
     policy_kwargs = {"net_arch": {"pi": arch, "vf": arch}, "activation_fn": activation,
                      "log_std_init": float(config["policy"]["log_std_init"]), "ortho_init": bool(config["policy"]["ortho_init"]),
                      "optimizer_kwargs": {"eps": 1e-5, "fused": True}}
