@@ -18,7 +18,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.checkpoints import save_checkpoint
 
-__all__ = ["ProgressBar", "PeriodicCheckpoint", "SaveBestCheckpoint", "TrainingClock", "CollisionLog", "TorchThreads"]
+__all__ = ["ProgressBar", "PeriodicCheckpoint", "SaveBestCheckpoint", "TrainingClock", "CollisionLog", "TorchThreads",
+           "policy_info"]
 
 
 class TrainingClock:
@@ -61,7 +62,9 @@ class ProgressBar(BaseCallback):
             self.bar.close()
 
 
-def _policy_info(model, clock: TrainingClock, base_info: dict[str, Any], **extra: Any) -> dict[str, Any]:
+def policy_info(model, clock: TrainingClock, base_info: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    """``base_info`` (the policy description) with the model's step count and the training wall time so far:
+    what a checkpoint's ``policy.json`` holds."""
     return {**base_info, "num_timesteps": int(model.num_timesteps), "wall_time_s": round(clock.total_s, 3), **extra}
 
 
@@ -98,7 +101,7 @@ class PeriodicCheckpoint(BaseCallback):
         """Write a checkpoint now, into ``folder/<steps>/``."""
         folder = self.folder / f"{self.model.num_timesteps:09d}"
         vec_normalize = self.model.get_vec_normalize_env()
-        save_checkpoint(folder, self.model, vec_normalize, _policy_info(self.model, self.clock, self.policy_info),
+        save_checkpoint(folder, self.model, vec_normalize, policy_info(self.model, self.clock, self.policy_info),
                         self.check_observations)
         self._last_save = time.perf_counter()
         self.saved.append(folder)
@@ -120,7 +123,7 @@ class SaveBestCheckpoint(BaseCallback):
     def _on_step(self) -> bool:
         best = float(getattr(self.parent, "best_mean_reward", np.nan))
         save_checkpoint(self.folder, self.model, self.model.get_vec_normalize_env(),
-                        _policy_info(self.model, self.clock, self.policy_info, eval_mean_return=best),
+                        policy_info(self.model, self.clock, self.policy_info, eval_mean_return=best),
                         self.check_observations)
         if self.on_save is not None:
             self.on_save()

@@ -58,6 +58,7 @@ __all__ = [
     "read_vecnormalize",
     "save_checkpoint",
     "save_vecnormalize",
+    "training_env_steps",
     "upgrade_checkpoint",
     "vecnormalize_from_json",
     "write_model_card",
@@ -336,6 +337,11 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
     lines += ["", "Hyperparameters and every other setting: `model_card.json` (`config`).", ""]
     md_path.write_text("\n".join(lines))
     return json_path, md_path
+
+
+def training_env_steps(training: dict[str, Any]) -> int:
+    """Env steps a model card's ``training`` section spent: PPO's, plus a warm start's demonstrations."""
+    return int(training["total_timesteps"]) + int((training.get("warm_start") or {}).get("demo_env_steps", 0))
 
 
 def _warm_start_text(warm: dict[str, Any]) -> str:

@@ -349,7 +349,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     from stable_baselines3.common.callbacks import CallbackList, EvalCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from agents.callbacks import CollisionLog, PeriodicCheckpoint, ProgressBar, SaveBestCheckpoint, TorchThreads, TrainingClock
+    from agents.callbacks import CollisionLog, PeriodicCheckpoint, ProgressBar, SaveBestCheckpoint, TorchThreads, TrainingClock, policy_info
     from agents.checkpoints import load_model, read_json, save_checkpoint, write_model_card
     from agents.envs import make_vec_env
 
@@ -416,7 +416,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
 
         if warm is not None:  # the cloned policy is the first candidate for best/: PPO has to beat it
             warm["eval_mean_return"] = _evaluate_as_best(model, train_env, evaluation, out / "best",
-                                                         _policy_info_now(description, model, clock), checks)
+                                                         policy_info(model, clock, description), checks)
         ppo_started = time.perf_counter()
         time_split = TimeSplit(venv)  # wrappers pass step_time_s on from the env (and a residual's base) that count it
         periodic = PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks,
@@ -509,10 +509,6 @@ def warm_start_from_controller(config: dict[str, Any], model: Any, normalizer: A
             "demo_env_steps": demos.n_samples, "demo_wall_time_s": round(demos.wall_time_s, 2),
             "demo_steps_per_s": round(demos.n_samples / max(demos.wall_time_s, 1e-9), 1),
             "controller_failures": int(getattr(controller, "failures", 0)), "cloning": cloning}
-
-
-def _policy_info_now(description: dict[str, Any], model: Any, clock: Any) -> dict[str, Any]:
-    return {**description, "num_timesteps": int(model.num_timesteps), "wall_time_s": round(clock.total_s, 3)}
 
 
 def _evaluate_as_best(model: Any, train_env: Any, evaluation: Any, folder: Path, info: dict[str, Any],

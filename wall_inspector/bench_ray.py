@@ -223,11 +223,12 @@ def plan(args: argparse.Namespace) -> int:
             from None
     trial_minutes = None
     if args.trial_card is not None:
+        from agents.checkpoints import training_env_steps
+
         try:
             training = json.loads(Path(args.trial_card).read_text())["training"]
             trial_minutes = float(training["total_wall_time_s"]) / 60
-            # a warm start's demonstrations are env steps of the run too
-            trial_steps = int(training["total_timesteps"]) + int((training.get("warm_start") or {}).get("demo_env_steps", 0))
+            trial_steps = training_env_steps(training)  # a warm start's demonstrations included
         except (OSError, ValueError, KeyError, TypeError):
             raise SystemExit(f"--trial-card {args.trial_card}: not a model card (training.total_wall_time_s)") from None
     lines = [f"| machines | CPUs | all flights of `compare` (min) | the same, one flight at a time per machine (min) | "

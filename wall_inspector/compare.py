@@ -160,17 +160,18 @@ def budgets(preset: str, tasks: list[str], with_ppo: bool) -> list[dict[str, Any
                          "wall_time_s": used.get("wall_time_s")})
         if with_ppo:
             from agents import pretrained_path
+            from agents.checkpoints import training_env_steps
 
             card_path = pretrained_path(task) / "model_card.json"
             if card_path.is_file():
                 training = json.loads(card_path.read_text())["training"]
-                # a warm start's demonstrations are env steps of the training too; its controller's own
-                # tuning is that controller's row
+                # a warm start's demonstrations count as env steps of the training (training_env_steps); its
+                # controller's own tuning is that controller's row
                 warm = training.get("warm_start") or {}
                 settings = "shipped agent" + (f", warm-started from {METHOD_LABELS.get(warm['controller'], warm['controller'])} "
                                               "demonstrations" if warm.get("controller") else "")
                 rows.append({"task": task, "method": "PPO", "settings": settings, "trials": None,
-                             "env_steps": training["total_timesteps"] + int(warm.get("demo_env_steps", 0)),
+                             "env_steps": training_env_steps(training),
                              "wall_time_s": training["total_wall_time_s"]})
     return rows
 
