@@ -55,6 +55,36 @@ def test_pid_is_pulled_into_the_wall_when_suction_beats_its_stiffness():
     assert tuned["collisions"] == 0 and tuned["wall_normal_rmse"] < 0.01
 
 
+def _hover_height_error(policy_kwargs: dict, seconds: float = 8.0) -> np.ndarray:
+    """Height error (m) hovering under a steady 0.5 N downward force that the PID does not model."""
+    from wall_env.effects import make_effect
+
+    env = gym.make("WallInspector/WallHover-v0", **FREE_HOVER, noise=False, duration=seconds,
+                   effects=[make_effect("constant_force", F=[0.0, 0.0, -0.5])])
+    pid = PID.from_env(env, preset="paper", **policy_kwargs)
+    obs, _ = env.reset(seed=0)
+    errors = []
+    done = False
+    while not done:
+        obs, _, terminated, truncated, _ = env.step(pid.predict(obs)[0])
+        errors.append(float(obs[OBSERVATION_FIELDS["p_error"]][2]))
+        done = terminated or truncated
+    return np.array(errors)
+
+
+def test_integral_action_removes_the_sag_under_a_steady_force():
+    mass = PID.from_env(gym.make("WallInspector/WallHover-v0"), preset="paper").vehicle.mass
+    # without integral the PID settles where Kp e balances the force: e = -F / (m Kp)
+    plain = _hover_height_error({})
+    assert plain[-50:].mean() == pytest.approx(-0.5 / (mass * 10.0), rel=0.03)
+    integral = _hover_height_error({"ki": (0.0, 0.0, 10.0)})
+    assert abs(integral[-50:].mean()) < 1e-3
+    assert np.abs(integral).max() < np.abs(plain).max() + 0.01  # no overshoot beyond the plain sag
+    # a limit below the force's share (0.5 N / m) leaves part of the sag: the integral cannot wind up past it
+    limited = _hover_height_error({"ki": (0.0, 0.0, 10.0), "integral_limit": 0.2})
+    assert limited[-50:].mean() == pytest.approx(-(0.5 / mass - 0.2) / 10.0, rel=0.05)
+
+
 def test_batch_prediction_equals_single_predictions():
     env = gym.make("WallInspector/WallSweep-v0")
     pid = PID.from_env(env)
@@ -65,6 +95,21 @@ def test_batch_prediction_equals_single_predictions():
         single, _ = pid.predict(obs)
         assert single.shape == (4,)
         np.testing.assert_allclose(single, batch[i], atol=1e-7)
+
+
+def test_each_env_of_a_batch_keeps_its_own_integral():
+    envs = [gym.make("WallInspector/WallSweep-v0") for _ in range(3)]
+    gains = {"ki": (2.0, 2.0, 5.0)}
+    batched = PID.from_env(envs[0], **gains)
+    singles = [PID.from_env(env, **gains) for env in envs]
+    observations = [env.reset(seed=s)[0] for s, env in enumerate(envs)]
+    for step in range(40):
+        actions, _ = batched.predict(np.stack(observations), episode_start=np.full(3, step == 0))
+        for i, env in enumerate(envs):
+            np.testing.assert_allclose(singles[i].predict(observations[i])[0], actions[i], atol=1e-6)
+            observations[i] = env.step(actions[i])[0]
+    integrals = [memory["position_integral"] for memory in batched._memory]
+    assert min(np.abs(a - b).max() for a, b in ((integrals[0], integrals[1]), (integrals[1], integrals[2]))) > 1e-4
 
 
 def test_nan_observation_gives_hover_and_a_counted_warning():
@@ -99,6 +144,8 @@ def test_hover_command_levels_a_tilted_vehicle_and_survives_garbage():
     ({"k_attitude": (6.0, 6.0, math.nan)}, "k_attitude"),
     ({"max_tilt_deg": 95.0}, "max_tilt_deg"),
     ({"position_error_limit": 0.0}, "position_error_limit"),
+    ({"ki": (0.0, 0.0, -1.0)}, "ki"),
+    ({"integral_limit": -0.5}, "integral_limit"),
 ])
 def test_bad_pid_arguments_name_the_argument_and_range(kwargs, name):
     env = gym.make("WallInspector/WallHover-v0")
