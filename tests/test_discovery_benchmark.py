@@ -1,4 +1,4 @@
-"""bench-discover --acceptance: its figures from the per-log records, and how its pairs are planned (no flights)."""
+"""bench-discover --acceptance: its figures from the per-log records, and how its pairs and near-surface surveys fly."""
 
 from __future__ import annotations
 
@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from discovery.benchmark import summarise
-from discovery.hidden_effects import draw_pair, steady_height_shift
+from discovery.fly import fly
+from discovery.hidden_effects import draw_pair
 from discovery.scenarios import SCENARIOS
-from wall_env.vehicle import GRAVITY, VehicleParams
+from wall_env.vehicle import GRAVITY
 
 
 def _record(case, errors, in_std, *, named_right=True, form_right=True, left_open=(), seed=7):
@@ -38,22 +39,29 @@ def test_misses_of_ten_percent_are_told_apart(capsys):
     assert "1 farther or missing" in out
 
 
-@pytest.mark.parametrize("scale", [0.85, 1.0, 1.15])
-def test_steady_height_shift_of_a_thrust_scale_is_the_pids_rest_point(scale):
-    # T = m (g - kp e) and scale * T = m g at rest: e = g (1 - 1 / scale) / kp
-    shift = steady_height_shift({"name": "thrust_scale", "params": {"scale": scale}}, 10.0)
-    assert shift == pytest.approx(GRAVITY * (1.0 - 1.0 / scale) / 10.0, abs=1e-9)
-
-
-def test_steady_height_shift_of_a_steady_force_is_its_vertical_part_over_the_spring():
-    shift = steady_height_shift({"name": "constant_force", "params": {"F": [0.3, -0.2, -0.4]}}, 20.0)
-    assert shift == pytest.approx(-0.4 / (VehicleParams().mass * 20.0), abs=1e-12)
-
-
-def test_a_ground_pair_is_planned_where_the_vehicle_will_hold_it():
+def test_a_ground_pair_flies_the_ground_survey_as_planned():
     rng = np.random.default_rng(5)
     effects, flight = draw_pair(("ground_effect", "thrust_scale"), rng)
-    planned = SCENARIOS["ground-survey"].survey["centre"][2]
-    shift = steady_height_shift(effects[1], 10.0)  # the ground survey flies the authors' PID, kp_z = 10
-    assert abs(shift) > 0.02
-    assert flight["survey"]["centre"][2] == pytest.approx(planned - shift, abs=1e-12)
+    assert [e["name"] for e in effects] == ["ground_effect", "thrust_scale"]
+    assert flight == {"scenario": "ground-survey"}  # no re-planning: the PID's integral holds the heights
+
+
+@pytest.mark.parametrize("scenario, scale", [("ceiling-survey", 0.86), ("ground-survey", 1.14)])
+def test_near_surface_surveys_hold_their_height_against_a_thrust_error(scenario, scale):
+    # a thrust error off the surface (so the plain PID survives it): without integral action the PID
+    # settles g (1 - 1/scale) / Kp away from the planned height
+    survey = SCENARIOS[scenario].survey
+    assert survey is not None
+    planned = survey["centre"][2]
+    kp_z = SCENARIOS[scenario].policy_kwargs["kp"][2]
+    heights = {}
+    for label, extra in (("integral", {}), ("none", {"ki": [0.0, 0.0, 0.0]})):
+        log, summary = fly(None, "pid", f"thrust_scale:scale={scale}", 2, None, scenario=scenario, duration=14.0,
+                           rate_hz=100.0, policy_kwargs=extra)
+        assert not summary["terminated"]
+        t, z = log.t, log.p_world[:, 2]
+        heights[label] = float(np.mean(z[t > 7.0]))  # two vertical periods after the glide-in has settled
+    shift = GRAVITY * (1.0 - 1.0 / scale) / kp_z
+    assert abs(shift) > 0.04
+    assert heights["none"] - planned == pytest.approx(shift, abs=0.006)
+    assert abs(heights["integral"] - planned) < 0.006
