@@ -30,6 +30,8 @@ _AXES = "xyz"
 MANOEUVRES = {
     ("wall_suction", "k_s"): "fly with the rotors within 0.15 m of the wall, at several distances",
     ("wall_suction", "d_thr"): "fly from 0.3 m in to 0.07 m from the wall and back, slowly",
+    ("wall_suction", "thrust_scaling"): "fly within 0.15 m of the wall while climbing and descending briskly "
+                                        "(thrust varying by 20 % or more)",
     ("ground_effect", "radius"): "hover at several heights from 0.1 m to 0.5 m above the ground",
     ("ground_effect", "offset"): "fly slowly from 0.3 m down to within 0.03 m of the ground and back, several "
                                  "times (the offset shows where the height is comparable to it)",

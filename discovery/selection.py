@@ -11,7 +11,8 @@ per parameter::
 
 so every axis counts by its physical share of the force gap: a tiny gain on the
 quietest axis cannot outweigh halving the error on another (a score summing each
-axis' own log-error would let it). ``p(M)`` counts parameters, ``N`` is the number of
+axis' own log-error would let it). ``p(M)`` counts parameters (an option that adds none, wall suction scaled by rotor
+thrust, counts as one), ``N`` is the number of
 independent residual values per axis (samples divided by the smoothing kernel's
 correlation length ``1 / sum(w^2)``), and ``alpha = 1e-4``: a parameter has to raise
 the held-out likelihood as much as a 3.9-sigma detection would (``c = 15.1``), or by
@@ -33,6 +34,10 @@ drag on the air-relative velocity with a fitted steady wind (``quadratic_drag[wi
 looks like a steady force plus drag, so it is tried after the selection in place of
 any chosen subset of :data:`WIND_REPLACES`, and kept where it scores better.
 
+Once the effects are chosen, each is given the form that scores best next to all the
+others (:func:`_refine_forms`): the round that chose an effect saw only the effects
+chosen before it.
+
 Candidates the flight cannot tell apart are recorded (:attr:`Selection.alike`): a
 runner-up of the chosen step whose score is within one parameter price of the
 winner's and that explains a material share on its own.
@@ -52,6 +57,7 @@ from discovery.residuals import FlightData
 from wall_env.effects import Effect, make_effect
 
 __all__ = ["ALPHA", "MIN_SHARE", "VARIANTS", "Candidate", "Step", "Selection", "effective_samples", "parameter_price", "score",
+           "options_without_parameters",
            "forward_selection", "fit_only"]
 
 ALPHA = 1e-4  # significance a parameter must reach on held-out data
@@ -151,9 +157,21 @@ class _Evaluator:
             fit = problem.fit(previous=start)
             cv, _ = problem.cross_validate(fit)
             axes = _mse_axes(cv)
-            self.cache[key] = Candidate(list(names), fit, cv, float(axes.sum()), axes,
-                                        score(axes, int(fit.theta.size), self.n_eff))
+            priced = int(fit.theta.size) + sum(options_without_parameters(self.templates[n]) for n in names)
+            self.cache[key] = Candidate(list(names), fit, cv, float(axes.sum()), axes, score(axes, priced, self.n_eff))
         return self.cache[key]
+
+
+def options_without_parameters(effect: Effect) -> int:
+    """Options switched on from their default that add no parameter (wall suction's thrust scaling).
+
+    Such a form has as many parameters as the plain one, so on a flight that cannot tell them
+    apart either would win by noise; each such option is priced as one parameter, so the data
+    choose it only when it explains more by as much as a parameter must.
+    """
+    if len(effect.parameters) > len(type(effect).parameters):
+        return 0
+    return sum(1 for k, v in effect.option_values.items() if v != type(effect).options.get(k))
 
 
 def _params_by_name(candidate: Candidate) -> dict[str, np.ndarray]:
@@ -234,20 +252,55 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
         steps.append(Step(tried, best.names[-1], current.mse, best.mse))
         current = best
     current, removed = _backward(evaluator, current, material)
+    refined, swaps = _refine_forms(evaluator, current)
+    if swaps:  # another form may leave a companion effect nothing to explain
+        current, dropped = _backward(evaluator, refined, material)
+        removed += dropped
     if "quadratic_drag" in base and variants is None:
         current, evaluator = _drag_in_wind(data, r_nom, evaluator, current, base["quadratic_drag"], progress)
     explained = _sequential_explained(evaluator, current, nominal)
     explained = {effect_name(k): v for k, v in explained.items()}
     chosen_names = {effect_name(k) for k in current.names}
     alike = [a for a in alike if a["chosen"] in chosen_names]
-    forms = [{"effect": effect_name(k), "form": k} for k in current.names]
+    forms = [{"effect": effect_name(k), "form": k, **({"chosen_first_as": swaps[k]} if k in swaps else {})}
+             for k in current.names]
     form_limits = _form_limits(evaluator, current)
     return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms, form_limits)
 
 
+def _refine_forms(evaluator: _Evaluator, current: Candidate) -> tuple[Candidate, dict[str, str]]:
+    """Each chosen effect in the form that scores best next to all the others.
+
+    A round of forward selection weighs an effect's forms against the model of that round
+    only, and another effect found later can change which form the data favour: under a
+    ceiling with a thrust error, a steady force chosen first absorbs the thrust error's share
+    and the plain ceiling form wins its round, while next to the thrust scale chosen later the
+    form with the distance offset lowers the held-out force gap by a further 29 %. So, once
+    the effects are chosen, each one's other forms (plain or fuller) are tried in its place and
+    the best-scoring swap is made while one lowers the score (a fuller form only with its extra
+    parameters determined); every swap lowers the score, so this ends. Returns the model and
+    the form each swapped effect was chosen in (by its new key).
+    """
+    swaps: dict[str, str] = {}
+    while True:
+        best = current
+        for key in current.names:
+            for form in (k for k in evaluator.templates if effect_name(k) == effect_name(key) and k != key):
+                names = [form if k == key else k for k in current.names]
+                previous = {k: v for k, v in _params_by_name(current).items() if k != key}
+                cand = evaluator.evaluate(names, previous=previous)
+                if cand.score < best.score and _extra_determined(cand, form):
+                    best, swap = cand, (key, form)
+        if best is current:
+            return current, swaps
+        swaps[swap[1]] = swaps.pop(swap[0], swap[0])
+        current = best
+
+
 def _form_limits(evaluator: _Evaluator, current: Candidate) -> list[dict]:
-    """Why each chosen effect kept its plain form where a fuller form has parameters of its own (the
-    ground and ceiling effects' distance offset), with the manoeuvre that would determine them, as
+    """Why each chosen effect kept its plain form where the literature has a fuller one (the ground and
+    ceiling effects' distance offset, wall suction scaled by rotor thrust), with the manoeuvre that
+    would tell them apart, as
     ``{"effects", "reason", "manoeuvre"}`` like :func:`discovery.coverage.flight_limits`.
 
     The plain form is kept when the fuller one does not pay for its extra parameters or leaves
@@ -260,21 +313,26 @@ def _form_limits(evaluator: _Evaluator, current: Candidate) -> list[dict]:
         for form in (k for k in evaluator.templates if "[" in k and effect_name(k) == key):
             effect = evaluator.templates[form]
             extra = [p for p in effect.parameters if p not in type(effect).parameters]
-            if not extra:
-                continue
+            options = [k for k, v in effect.option_values.items() if v != type(effect).options.get(k)]
             names = [form if k == key else k for k in current.names]
             fuller = evaluator.evaluate(names, previous={k: v for k, v in _params_by_name(current).items() if k != key})
             index = names.index(form)
             fitted, std = fuller.fit.effects[index], fuller.fit.std_dicts()[index]
             open_ = {c["name"] for c in undetermined_cases([fitted], [std])}
+            gain = (current.mse - fuller.mse) / current.mse if current.mse > 0 else 0.0
+            lowers = (f"lowers the held-out force gap left by the plain form by only {100 * gain:.2g} %" if gain > 0
+                      else "does not lower the held-out force gap left by the plain form")
+            if not extra:  # an option of the same parameters (wall suction scaled by rotor thrust)
+                out.append({"effects": [form], "reason": f"the form with {' and '.join(options)} was fitted but it "
+                                                         f"{lowers}, less than a parameter must; the plain form is kept",
+                            "manoeuvre": determining_manoeuvre(key, options[0])})
+                continue
             values = ", ".join(f"{p.name} = {float(np.ravel(fitted.values[p.name])[0]):.3g} +- "
                                f"{float(np.ravel(std[p.name])[0]):.2g} {p.unit}" for p in extra)
             if open_ & {p.name for p in extra}:
                 why = "the flight does not determine its extra parameter"
             else:
-                gain = (current.mse - fuller.mse) / current.mse if current.mse > 0 else 0.0
-                why = (f"it lowers the held-out force gap left by the plain form by only {100 * gain:.2g} %, which does "
-                       "not pay for its extra parameter")
+                why = f"it {lowers}, which does not pay for its extra parameter"
             out.append({"effects": [form], "reason": f"the fuller form was fitted ({values}) but {why}; the plain form "
                                                      "is kept and its parameters describe the flown distances only",
                         "manoeuvre": determining_manoeuvre(key, extra[0].name)})
@@ -326,6 +384,8 @@ def _extra_determined(candidate: Candidate, key: str) -> bool:
     effect = candidate.fit.effects[index]
     std = candidate.fit.std_dicts()[index]
     extra = [p for p in effect.parameters if p not in type(effect).parameters]
+    if not extra:
+        return True  # an option without parameters of its own (priced as one by the score)
     cases = undetermined_cases([effect], [std])
     return sum(1 for c in cases if c["name"] in {p.name for p in extra}) < sum(p.size for p in extra)
 

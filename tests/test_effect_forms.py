@@ -109,3 +109,35 @@ def test_a_plain_form_kept_says_what_its_fuller_form_came_to():
     assert "offset = " in limit["reason"] and "plain form is kept" in limit["reason"]
     assert "within 0.03 m of the ceiling" in limit["manoeuvre"]
     assert limit in found.report()["limits"]
+
+
+def test_an_option_without_parameters_is_priced_as_one():
+    from discovery.selection import options_without_parameters
+
+    assert options_without_parameters(make_effect("wall_suction", thrust_scaling=True)) == 1
+    assert options_without_parameters(make_effect("wall_suction")) == 0
+    # the distance offset brings a parameter of its own, which the score prices already
+    assert options_without_parameters(make_effect("ground_effect", distance_offset=True)) == 0
+
+
+@pytest.mark.parametrize("form", ["wall_suction_scaled", "wall_suction"])
+def test_the_data_choose_whether_suction_scales_with_rotor_thrust(form):
+    """The acceptance's suction survey climbs and descends briskly (thrust +-13 %): suction scaled by rotor
+    thrust is told from the plain form both ways, and the form not chosen is named with its manoeuvre."""
+    from discovery.fly import fly
+    from discovery.hidden_effects import draw, spec
+    from discovery.workflow import Discovery
+
+    effect, flight = draw(form, np.random.default_rng(3))
+    log, summary = fly(None, "pid", spec([effect]), 11, None, duration=30.0, rate_hz=100.0, **flight)
+    assert not summary["terminated"]
+    found = Discovery(candidates=["wall_suction", "thrust_scale", "constant_force"]).fit(log)
+    assert found.names_ == ["wall_suction"]
+    scaled = form == "wall_suction_scaled"
+    assert found.effects_[0].option_values == {"thrust_scaling": scaled}
+    for key in ("k_s", "d_thr"):
+        assert found.effects_[0].values[key] == pytest.approx(effect["params"][key], rel=0.05)
+    left_open = [lim for lim in found.limits_ if lim["effects"] == ["wall_suction[thrust_scaling]"]]
+    assert len(left_open) == (0 if scaled else 1)
+    if left_open:
+        assert "climbing and descending" in left_open[0]["manoeuvre"]
