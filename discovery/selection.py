@@ -169,9 +169,17 @@ def options_without_parameters(effect: Effect) -> int:
     apart either would win by noise; each such option is priced as one parameter, so the data
     choose it only when it explains more by as much as a parameter must.
     """
-    if len(effect.parameters) > len(type(effect).parameters):
-        return 0
-    return sum(1 for k, v in effect.option_values.items() if v != type(effect).options.get(k))
+    return 0 if _extra_parameters(effect) else len(_switched_options(effect))
+
+
+def _extra_parameters(effect: Effect) -> list:
+    """The parameters a fuller form has beyond its plain form (the distance offset, a wind)."""
+    return [p for p in effect.parameters if p not in type(effect).parameters]
+
+
+def _switched_options(effect: Effect) -> list[str]:
+    """The options ``effect`` sets away from their defaults."""
+    return [k for k, v in effect.option_values.items() if v != type(effect).options.get(k)]
 
 
 def _params_by_name(candidate: Candidate) -> dict[str, np.ndarray]:
@@ -312,8 +320,8 @@ def _form_limits(evaluator: _Evaluator, current: Candidate) -> list[dict]:
     for key in current.names:
         for form in (k for k in evaluator.templates if "[" in k and effect_name(k) == key):
             effect = evaluator.templates[form]
-            extra = [p for p in effect.parameters if p not in type(effect).parameters]
-            options = [k for k, v in effect.option_values.items() if v != type(effect).options.get(k)]
+            extra = _extra_parameters(effect)
+            options = _switched_options(effect)
             names = [form if k == key else k for k in current.names]
             fuller = evaluator.evaluate(names, previous={k: v for k, v in _params_by_name(current).items() if k != key})
             index = names.index(form)
@@ -383,7 +391,7 @@ def _extra_determined(candidate: Candidate, key: str) -> bool:
     index = candidate.names.index(key)
     effect = candidate.fit.effects[index]
     std = candidate.fit.std_dicts()[index]
-    extra = [p for p in effect.parameters if p not in type(effect).parameters]
+    extra = _extra_parameters(effect)
     if not extra:
         return True  # an option without parameters of its own (priced as one by the score)
     cases = undetermined_cases([effect], [std])
