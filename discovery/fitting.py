@@ -25,9 +25,9 @@ Fits and cross-validation use every ``window / 10``-th residual row
 (:attr:`~discovery.residuals.Segment.fit_rows`; rows a tenth of the smoothing window
 apart carry nearly the same information); :func:`out_of_fold_residuals` gives the
 held-out residual of a result at every sample for the reported figures.
-Standard errors come from the Jacobian at the solution, ``sigma^2 (J^T J)^-1``, inflated
-by the integrated autocorrelation time of the residual rows (smoothed residuals of
-neighbouring samples are not independent).
+Standard errors are Newey-West's sandwich at the solution (:meth:`EffectFit._standard_errors`):
+each axis keeps its own noise level, and residual rows are correlated over the smoothing
+window and beyond.
 """
 
 from __future__ import annotations
@@ -38,11 +38,11 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from discovery.residuals import FlightData
+from discovery.residuals import FlightData, Segment
 from wall_env.aero import AeroModel
 from wall_env.effects import Effect, make_effect
 
-__all__ = ["CV_TOL", "STARTS", "EffectFit", "FitResult", "applicable", "autocorrelation_time", "out_of_fold_residuals"]
+__all__ = ["CV_TOL", "STARTS", "EffectFit", "FitResult", "applicable", "hac_lags", "out_of_fold_residuals"]
 
 # Starting points for effects whose force is not affine in their parameters (plausible
 # physical values; the fit is bounded by each parameter's range from the library).
@@ -64,22 +64,18 @@ def applicable(effect: Effect, data: FlightData) -> bool:
     return any(effect.applies_to(seg.scene.structure) for seg in data.segments)
 
 
-def autocorrelation_time(residual: np.ndarray, max_lag: int = 400) -> float:
-    """Integrated autocorrelation time (in samples, >= 1) of a residual ``(n, d)``, pooled over columns."""
-    x = residual - residual.mean(axis=0)
-    n = len(x)
-    if n < 8:
-        return 1.0
-    var = float(np.sum(x * x))
-    if var <= 0:
-        return 1.0
-    tau = 1.0
-    for lag in range(1, min(max_lag, n // 4)):
-        rho = float(np.sum(x[lag:] * x[:-lag])) / var
-        if rho <= 0.05:
-            break
-        tau += 2.0 * rho
-    return tau
+#: smoothing windows of lags over which the standard errors sum the scores' correlation (:func:`hac_lags`)
+HAC_WINDOWS = 2.0
+
+
+def hac_lags(segment: Segment) -> int:
+    """Lags (in fit rows) of the Newey-West sum: :data:`HAC_WINDOWS` smoothing windows.
+
+    Smoothing alone correlates residual rows over one window; the unrecorded command noise and
+    the controller's answer to it stretch the correlation further.
+    """
+    rows_per_window = segment.kernel.window / max(1, segment.kernel.window // 10)
+    return max(1, int(round(HAC_WINDOWS * rows_per_window)))
 
 
 @dataclass
@@ -208,18 +204,20 @@ class EffectFit:
                 r -= f
         return out
 
-    def _stacked(self, theta: np.ndarray, masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        residual = self.residuals(theta)
-        jac_parts: list[list[np.ndarray]] = [[] for _ in self.data.segments]
+    def _jacobians(self, theta: np.ndarray) -> list[np.ndarray]:
+        """Jacobian of the residual ``(m, 3, p)`` per segment at the fit rows."""
+        parts: list[list[np.ndarray]] = [[] for _ in self.data.segments]
         for term, th in zip(self.terms, self._split(theta)):
             _, jacobians = term.evaluate(th)
             for s, j in enumerate(jacobians):
-                jac_parts[s].append(-j)
-        rows_r, rows_j = [], []
-        for s, mask in enumerate(masks):
-            rows_r.append(residual[s][mask].reshape(-1))
-            j = np.concatenate(jac_parts[s], axis=2)[mask]  # (m, 3, p)
-            rows_j.append(j.reshape(-1, j.shape[2]))
+                parts[s].append(-j)
+        return [np.concatenate(p, axis=2) for p in parts]
+
+    def _stacked(self, theta: np.ndarray, masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        residual = self.residuals(theta)
+        jacobians = self._jacobians(theta)
+        rows_r = [r[mask].reshape(-1) for r, mask in zip(residual, masks)]
+        rows_j = [j[mask].reshape(-1, j.shape[2]) for j, mask in zip(jacobians, masks)]
         return np.concatenate(rows_r), np.concatenate(rows_j, axis=0)
 
     # ------------------------------------------------------------------ fitting
@@ -278,15 +276,29 @@ class EffectFit:
 
     def _standard_errors(self, theta: np.ndarray, masks: list[np.ndarray], jac: np.ndarray,
                          fun: np.ndarray) -> np.ndarray:
+        """Heteroscedasticity- and autocorrelation-consistent (Newey-West) standard errors.
+
+        ``cov = A^-1 B A^-1`` with ``A = J^T J`` and ``B`` the long-run covariance of the
+        per-row scores ``g_k = J_k^T r_k`` (all three axes of a row together), summed over
+        lags up to :func:`hac_lags` with Bartlett weights, within each segment. Unlike
+        ``sigma^2 (J^T J)^-1`` this lets each axis have its own noise level (a vertical
+        parameter is not credited with the quieter horizontal axes) and lets the noise be
+        correlated over the smoothing window and beyond (the command noise a log does not record
+        moves the vehicle, and with it every later residual).
+        """
         n, p = jac.shape
         if p == 0:
             return np.zeros(0)
-        dof = max(n - p, 1)
-        sigma2 = float(fun @ fun) / dof
-        residual = self.residuals(theta)
-        taus = [autocorrelation_time(r[m]) for r, m in zip(residual, masks) if m.sum() > 8]
-        tau = float(np.mean(taus)) if taus else 1.0
-        cov = np.linalg.pinv(jac.T @ jac) * sigma2 * tau
+        a_inv = np.linalg.pinv(jac.T @ jac)
+        b = np.zeros((p, p))
+        for seg, r, j, mask in zip(self.data.segments, self.residuals(theta), self._jacobians(theta), masks):
+            scores = np.einsum("ma,map->mp", r * mask[:, None], j)
+            b += scores.T @ scores
+            lags = hac_lags(seg)
+            for lag in range(1, min(lags, len(scores) - 1) + 1):
+                c = scores[lag:].T @ scores[:-lag]
+                b += (1.0 - lag / (lags + 1.0)) * (c + c.T)
+        cov = a_inv @ b @ a_inv * n / max(n - p, 1)
         return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
     # ------------------------------------------------------------------ cross-validation

@@ -154,3 +154,26 @@ def test_optional_columns_feed_the_residual_consistently(columns):
         by_derivative = prepare([log]).residuals(data.nominal_model)[0]
         assert np.abs(residual - by_derivative).max() < 0.02
         assert np.sqrt(np.mean((residual - truth) ** 2)) < 0.03
+
+
+def test_standard_errors_match_the_spread_over_noise_seeds():
+    """A steady force fitted to eight noisy hover logs without one: the fit's standard errors are the spread
+    of its estimates over the seeds, axis by axis. The vertical axis carries the unrecorded thrust noise
+    (0.2 N per step) and is about four times noisier than the horizontal ones; pooled over the axes, a single
+    noise level would credit the vertical force with the quiet horizontal axes."""
+    from discovery.fitting import EffectFit
+
+    estimates, stds = [], []
+    for seed in range(8):
+        log, _ = fly("WallInspector/WallHover-v0", "pid", None, seed, None, env_kwargs={"standoff": 2.0},
+                     duration=20.0, rate_hz=100.0)
+        data = prepare([log])
+        fit = EffectFit(data, [make_effect("constant_force")], data.residuals(data.nominal_model)).fit()
+        estimates.append(fit.theta)
+        stds.append(fit.param_std)
+    spread = np.std(estimates, axis=0, ddof=1)
+    quoted = np.mean(stds, axis=0)
+    # eight seeds measure a spread to about +-25 %
+    assert np.all(quoted / spread > 0.6) and np.all(quoted / spread < 1.6), (quoted, spread)
+    assert quoted[2] > 2.5 * max(quoted[0], quoted[1])
+    assert np.all(np.abs(np.mean(estimates, axis=0)) < 3 * spread / np.sqrt(8))  # nothing there: no bias
