@@ -9,7 +9,8 @@ and compares what it found with what was flown. ``wall-inspector bench-discover
 
 Ranges: wall suction k_s 3.5-8 N/m, d_thr 0.11-0.15 m (paper: 4.1 N/m, 0.132 m);
 ground and ceiling effective radius 6-10 cm and 5-8 cm (6-9 cm with the distance offset
-of 1-4 cm, flown for at least 90 s, 3.5 to 20 cm above the ground or 5 to 22 cm under the ceiling); a steady force paired with wall suction
+of 1-4 cm, flown for at least 90 s, 3.5 to 20 cm above the ground or 5 to 22 cm under the ceiling with a
+vertical loop twice as stiff); a steady force paired with wall suction
 points away from the wall;
 thrust error 5-15 % either way; steady force 0.15-0.5 N per axis; extra linear drag
 0.1-0.4 N s/m per axis; quadratic drag 0.05-0.15 N s^2/m^2 per axis, with a steady

@@ -81,3 +81,19 @@ def test_a_ground_offset_flight_comes_down_to_its_planned_height_and_determines_
     assert record["samples"] >= 100 * OFFSET_MIN_DURATION
     assert record["named_right"] and record["form_right"]
     assert all(e is not None and e <= 0.10 for e in record["param_errors"].values()), record["param_errors"]
+
+
+def test_a_ceiling_offset_flight_holds_5_cm_against_the_strongest_pull_drawn():
+    """5 cm under a ceiling, the strongest ceiling effect the acceptance draws (r 9 cm, k2 1 cm) pulls the
+    ceiling survey's vertical loop into the ceiling on its first approach; the offset flight's stiffer loop holds."""
+    from discovery.hidden_effects import draw, spec
+
+    _, flight = draw("ceiling_effect_offset", np.random.default_rng(0))
+    strongest = spec([{"name": "ceiling_effect", "params": {"radius": 0.09, "offset": 0.01}}])
+    outcomes = {}
+    for label, gains in (("offset flight", flight["policy_kwargs"]), ("scenario", SCENARIOS["ceiling-survey"].policy_kwargs)):
+        log, summary = fly(None, "pid", strongest, 0, None, scenario="ceiling-survey", survey=flight["survey"],
+                           policy_kwargs=gains, duration=12.0, rate_hz=100.0)
+        outcomes[label] = (summary["collisions"], 2.0 - float(np.max(log.p_world[:, 2])))
+    assert outcomes["scenario"][0] >= 1
+    assert outcomes["offset flight"][0] == 0 and outcomes["offset flight"][1] > 0.02, outcomes
