@@ -43,8 +43,9 @@ _NEAR_WIDE = {"amplitude": (0.6, 0.6, 0.085), "period": (7.0, 9.0, 3.5)}  # 0.05
 # the log does not record (smoothing windows of 0.4 to 1.5 s give the same estimates), so the other lever is time.
 _GROUND_CLOSE = {"amplitude": (0.6, 0.6, 0.0825), "period": (7.0, 9.0, 5.0), "centre": (1.5, 0.0, 0.1175)}
 # 5 cm under a ceiling its pull (negative stiffness growing as 1 / d^3) beat the ceiling survey's vertical loop
-# (Kp 30, Kv 11, Ki 30): with the strongest effects drawn (r 9 cm, k2 1 cm) 15 of 15 flights hit the ceiling on
-# their first approach; twice as stiff, 3 of 15 did (thrust 14 % short at 50 Hz)
+# (Kp 30, Kv 11, Ki 30): with strong effects drawn (r 7-9 cm, k2 1-2 cm, five settings of thrust error and rate,
+# three seeds each) 15 of 15 flights hit the ceiling on their first approach; twice as stiff, 3 of 15 did (r 9 cm,
+# k2 1 cm, thrust 14 % short, 50 Hz)
 _CEILING_CLOSE_GAINS = {"kp": [8.0, 8.0, 60.0], "kv": [4.0, 4.0, 15.0], "ki": [0.0, 0.0, 60.0]}
 #: a distance offset and its radius are two parameters of one curve: their flights last at least this long (s)
 OFFSET_MIN_DURATION = 90.0
