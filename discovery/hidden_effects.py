@@ -73,7 +73,7 @@ def draw(form: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str,
                                                              "survey": _suction_survey(k_s, d_thr)}
     if form.startswith("ground_effect"):
         params = {"radius": rng.uniform(0.06, 0.10)}
-        if form == "ground_effect_offset":  # two parameters of one curve: a wider range of heights tells them apart
+        if form == "ground_effect_offset":  # two parameters of one curve: passes close to the ground tell them apart
             params = {"radius": rng.uniform(0.06, 0.09), "offset": rng.uniform(0.01, 0.04)}
             return {"name": "ground_effect", "params": params}, {
                 "scenario": "ground-survey", "survey": _GROUND_CLOSE, "min_duration": OFFSET_MIN_DURATION}
