@@ -99,6 +99,24 @@ def test_a_ceiling_offset_flight_holds_5_cm_against_the_strongest_pull_drawn():
     assert outcomes["offset flight"][0] == 0 and outcomes["offset flight"][1] > 0.02, outcomes
 
 
+def test_the_ceiling_offset_flight_holds_at_50_hz_with_the_thrust_short():
+    """A thrust 14 % short of the command weakens the vertical loop by as much; at 50 Hz the strongest ceiling
+    effect drawn then pulled a loop with Kp 60 into the ceiling, and the offset flight's loop (Kp 100) holds."""
+    from discovery.hidden_effects import draw, spec
+
+    _, flight = draw("ceiling_effect_offset", np.random.default_rng(0))
+    flown = spec([{"name": "ceiling_effect", "params": {"radius": 0.09, "offset": 0.01}},
+                  {"name": "thrust_scale", "params": {"scale": 0.86}}])
+    softer = {"kp": [8.0, 8.0, 60.0], "kv": [4.0, 4.0, 15.0], "ki": [0.0, 0.0, 60.0]}
+    outcomes = {}
+    for label, gains in (("offset flight", flight["policy_kwargs"]), ("Kp 60", softer)):
+        log, summary = fly(None, "pid", flown, 1, None, scenario="ceiling-survey", survey=flight["survey"],
+                           policy_kwargs=gains, duration=40.0, rate_hz=50.0)
+        outcomes[label] = (summary["collisions"], 2.0 - float(np.max(log.p_world[:, 2])))
+    assert outcomes["Kp 60"][0] >= 1
+    assert outcomes["offset flight"][0] == 0 and outcomes["offset flight"][1] > 0.02, outcomes
+
+
 def test_the_weakest_plain_ceiling_effect_flown_close_takes_80_percent_of_the_gap_at_50_hz():
     """At 50 Hz the unrecorded thrust noise bounds what a weak ceiling effect can explain: flown by the ceiling
     survey (8 to 20 cm, Kp 30) the weakest effect drawn (r 5 cm) is named but takes 67-72 % of the held-out gap;
@@ -118,7 +136,7 @@ def test_the_weakest_plain_ceiling_effect_flown_close_takes_80_percent_of_the_ga
 
 def test_the_plain_ceiling_flight_holds_against_the_strongest_plain_effect_drawn():
     """The strongest plain ceiling effect drawn (r 8 cm) pulls the acceptance's plain ceiling flight (planned
-    5.5 cm from the ceiling) about 3 cm closer; the ducts, 1.75 cm above the body centre, stay clear at 50 Hz."""
+    5.5 cm from the ceiling) closer; the ducts, 1.75 cm above the body centre, stay more than 1 cm clear at 50 Hz."""
     from discovery.hidden_effects import draw, spec
 
     _, flight = draw("ceiling_effect", np.random.default_rng(0))
@@ -127,4 +145,4 @@ def test_the_plain_ceiling_flight_holds_against_the_strongest_plain_effect_drawn
                        policy_kwargs=flight["policy_kwargs"], duration=30.0, rate_hz=50.0)
     closest = 2.0 - float(np.max(log.p_world[:, 2]))
     assert summary["collisions"] == 0 and not summary["terminated"]
-    assert 0.02 < closest < 0.04, closest
+    assert 0.0275 < closest < 0.05, closest
