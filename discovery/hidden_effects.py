@@ -60,7 +60,8 @@ _CEILING_CLOSE_GAINS = {"kp": [8.0, 8.0, 100.0], "kv": [4.0, 4.0, 20.0], "ki": [
 _CEILING_NEAR = {"amplitude": (0.6, 0.6, 0.045), "period": (7.0, 9.0, 3.5), "centre": (1.5, 0.0, 1.90)}
 #: a distance offset and its radius are two parameters of one curve: their flights last at least this long (s).
 #: Over seeds 13-24 at 50 and 100 Hz (72 offset logs, singly and paired with a steady force or a thrust scale),
-#: 30 missed 10 % at 90 s, 23 at 180 s and 15 at 360 s; the ground offset alone missed 5 of 24 at 90 s, none at 360 s
+#: 30 missed 10 % at 90 s, 23 at 180 s and 15 at 360 s (ceiling flights with Kp 60); the ground offset alone
+#: missed 5 of 24 at 90 s, none at 360 s
 OFFSET_MIN_DURATION = 360.0
 
 
