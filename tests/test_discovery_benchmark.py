@@ -83,6 +83,15 @@ def test_a_ground_offset_flight_comes_down_to_its_planned_height_and_determines_
     assert all(e is not None and e <= 0.10 for e in record["param_errors"].values()), record["param_errors"]
 
 
+def _under_the_ceiling(effects: str, survey: dict, gains: dict, seed: int, duration: float,
+                       rate_hz: float) -> tuple[int, bool, float]:
+    """Fly the ceiling survey (ceiling at 2 m) with ``survey`` and PID ``gains``: collisions, whether the flight
+    ended early, and the closest the body centre came to the ceiling (m)."""
+    log, summary = fly(None, "pid", effects, seed, None, scenario="ceiling-survey", survey=survey,
+                       policy_kwargs=gains, duration=duration, rate_hz=rate_hz)
+    return summary["collisions"], summary["terminated"], 2.0 - float(np.max(log.p_world[:, 2]))
+
+
 def test_a_ceiling_offset_flight_holds_5_cm_against_the_strongest_pull_drawn():
     """5 cm under a ceiling, the strongest ceiling effect the acceptance draws (r 9 cm, k2 1 cm) pulls the
     ceiling survey's vertical loop into the ceiling on its first approach; the offset flight's stiffer loop holds."""
@@ -90,13 +99,10 @@ def test_a_ceiling_offset_flight_holds_5_cm_against_the_strongest_pull_drawn():
 
     _, flight = draw("ceiling_effect_offset", np.random.default_rng(0))
     strongest = spec([{"name": "ceiling_effect", "params": {"radius": 0.09, "offset": 0.01}}])
-    outcomes = {}
-    for label, gains in (("offset flight", flight["policy_kwargs"]), ("scenario", SCENARIOS["ceiling-survey"].policy_kwargs)):
-        log, summary = fly(None, "pid", strongest, 0, None, scenario="ceiling-survey", survey=flight["survey"],
-                           policy_kwargs=gains, duration=12.0, rate_hz=100.0)
-        outcomes[label] = (summary["collisions"], 2.0 - float(np.max(log.p_world[:, 2])))
+    outcomes = {label: _under_the_ceiling(strongest, flight["survey"], gains, 0, 12.0, 100.0) for label, gains in
+                (("offset flight", flight["policy_kwargs"]), ("scenario", SCENARIOS["ceiling-survey"].policy_kwargs))}
     assert outcomes["scenario"][0] >= 1
-    assert outcomes["offset flight"][0] == 0 and outcomes["offset flight"][1] > 0.02, outcomes
+    assert outcomes["offset flight"][0] == 0 and outcomes["offset flight"][2] > 0.02, outcomes
 
 
 def test_the_ceiling_offset_flight_holds_at_50_hz_with_the_thrust_short():
@@ -108,13 +114,10 @@ def test_the_ceiling_offset_flight_holds_at_50_hz_with_the_thrust_short():
     flown = spec([{"name": "ceiling_effect", "params": {"radius": 0.09, "offset": 0.01}},
                   {"name": "thrust_scale", "params": {"scale": 0.86}}])
     softer = {"kp": [8.0, 8.0, 60.0], "kv": [4.0, 4.0, 15.0], "ki": [0.0, 0.0, 60.0]}
-    outcomes = {}
-    for label, gains in (("offset flight", flight["policy_kwargs"]), ("Kp 60", softer)):
-        log, summary = fly(None, "pid", flown, 1, None, scenario="ceiling-survey", survey=flight["survey"],
-                           policy_kwargs=gains, duration=40.0, rate_hz=50.0)
-        outcomes[label] = (summary["collisions"], 2.0 - float(np.max(log.p_world[:, 2])))
+    outcomes = {label: _under_the_ceiling(flown, flight["survey"], gains, 1, 40.0, 50.0)
+                for label, gains in (("offset flight", flight["policy_kwargs"]), ("Kp 60", softer))}
     assert outcomes["Kp 60"][0] >= 1
-    assert outcomes["offset flight"][0] == 0 and outcomes["offset flight"][1] > 0.02, outcomes
+    assert outcomes["offset flight"][0] == 0 and outcomes["offset flight"][2] > 0.02, outcomes
 
 
 def test_the_weakest_plain_ceiling_effect_flown_close_takes_80_percent_of_the_gap_at_50_hz():
@@ -141,8 +144,7 @@ def test_the_plain_ceiling_flight_holds_against_the_strongest_plain_effect_drawn
 
     _, flight = draw("ceiling_effect", np.random.default_rng(0))
     strongest = spec([{"name": "ceiling_effect", "params": {"radius": 0.08}}])
-    log, summary = fly(None, "pid", strongest, 3, None, scenario="ceiling-survey", survey=flight["survey"],
-                       policy_kwargs=flight["policy_kwargs"], duration=30.0, rate_hz=50.0)
-    closest = 2.0 - float(np.max(log.p_world[:, 2]))
-    assert summary["collisions"] == 0 and not summary["terminated"]
+    collisions, ended_early, closest = _under_the_ceiling(strongest, flight["survey"], flight["policy_kwargs"], 3,
+                                                          30.0, 50.0)
+    assert collisions == 0 and not ended_early
     assert 0.0275 < closest < 0.05, closest
