@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from discovery.determination import separating_manoeuvre
+from discovery.selection import MIN_SHARE, MIN_WEIGHT_SHARE
 
 __all__ = ["build_report", "write_report", "format_summary"]
 
@@ -160,7 +161,9 @@ def format_summary(report: dict[str, Any]) -> str:
         elif report.get("unexplained"):
             lines.append("found no effect of the library that explains the residual (see UNEXPLAINED below)")
         else:
-            lines.append("found nothing: the logs agree with the nominal model within noise")
+            lines.append("found nothing: the logs agree with the nominal model within noise (no candidate explains "
+                         f"{100 * MIN_SHARE:g} % of the held-out residual energy and a force of "
+                         f"{100 * MIN_WEIGHT_SHARE:g} % of the weight)")
     b, a = report["gap_before"], report["gap_after"]
     if b.get("force_rms_N") is not None:
         lines.append(f"held-out force residual RMS: {_number(b['force_rms_N'])} N -> {_number(a['force_rms_N'])} N "

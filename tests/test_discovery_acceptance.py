@@ -15,10 +15,12 @@ import pytest
 
 from discovery.closed_loop import closed_loop_check, load_scenario
 from discovery.flight_log import read_log
+from discovery.selection import MIN_SHARE, MIN_WEIGHT_SHARE
 from discovery.fly import fly, scenario_path
 from discovery.workflow import Discovery
 from tests.discovery_support import draw_hidden_effect, effect_spec, relative_errors
 from wall_env.effects import EFFECTS
+from wall_env.vehicle import GRAVITY
 from wall_inspector.cli import main
 
 pytestmark = pytest.mark.slow
@@ -87,6 +89,22 @@ def test_clean_logs_name_no_effect(tmp_path, scenario):
     report = found.report()
     assert report["effects"] == []
     assert report["gap_after"] == report["gap_before"]
+
+
+def test_a_quiet_clean_log_names_no_effect_worth_less_than_its_force_floor():
+    """On this clean 500 Hz log a thrust scale of 0.9996 beats the parameter price and takes 13 % of the
+    held-out gap, but explains 0.004 N rms: less than 0.2 % of the weight, so it is not named."""
+    log, _ = fly(None, "pid", "", 28098, None, scenario="wall-sweep", duration=DURATION_S, rate_hz=500.0)
+    found = Discovery().fit(log)
+    assert found.names_ == []
+    first = found.selection_.steps[0]
+    scale = next(r for r in first.tried if r["name"] == "thrust_scale")
+    explained_N = np.sqrt(first.mse_before - scale["cv_mse_N2"])
+    weight_N = 1.0 * GRAVITY  # the default vehicle's
+    assert scale["score"] < found.selection_.nominal.score  # it pays for its parameter ...
+    assert scale["gain"] >= MIN_SHARE  # ... and takes a share of the gap ...
+    assert 0.0 < explained_N < MIN_WEIGHT_SHARE * weight_N  # ... but not a material force
+    assert abs(scale["params"]["scale"] - 1.0) < 1e-3
 
 
 # ---------------------------------------------------------------------- two effects at once
