@@ -15,8 +15,8 @@ import pytest
 
 from discovery.closed_loop import closed_loop_check, load_scenario
 from discovery.flight_log import read_log
-from discovery.selection import MIN_SHARE, MIN_WEIGHT_SHARE
 from discovery.fly import fly, scenario_path
+from discovery.selection import MIN_SHARE, MIN_WEIGHT_SHARE
 from discovery.workflow import Discovery
 from tests.discovery_support import draw_hidden_effect, effect_spec, relative_errors
 from wall_env.effects import EFFECTS
