@@ -9,7 +9,8 @@ and compares what it found with what was flown. ``wall-inspector bench-discover
 
 Ranges: wall suction k_s 3.5-8 N/m, d_thr 0.11-0.15 m (paper: 4.1 N/m, 0.132 m);
 ground and ceiling effective radius 6-10 cm and 5-8 cm (6-9 cm with the distance offset
-of 1-4 cm, flown for at least 360 s, 3.5 to 20 cm above the ground or 5 to 22 cm under the ceiling);
+of 1-4 cm, flown for at least 360 s, 3.5 to 20 cm above the ground or 5 to 22 cm under the ceiling;
+paired with a steady force or a thrust scale, also 120 s of that effect's own flight away from the surface);
 under a ceiling the vertical loop is stiffer than the ceiling survey's (Kp 100 against 30), and the plain
 effect is flown 5.5 to 14.5 cm from it; a steady force paired with wall suction
 points away from the wall;
@@ -63,6 +64,9 @@ _CEILING_NEAR = {"amplitude": (0.6, 0.6, 0.045), "period": (7.0, 9.0, 3.5), "cen
 #: 30 missed 10 % at 90 s, 23 at 180 s and 15 at 360 s (ceiling flights with Kp 60); the ground offset alone
 #: missed 5 of 24 at 90 s, none at 360 s
 OFFSET_MIN_DURATION = 360.0
+#: a distance offset paired with a steady force or a thrust scale: the second effect's own flight (s), a second log
+AWAY_DURATION = 120.0
+_AWAY_SEED = 1 << 30  # the away flight's seed is the pair's plus this
 
 
 def _suction_survey(k_s: float, d_thr: float) -> dict[str, Any]:
@@ -122,15 +126,22 @@ def draw(form: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str,
 def draw_pair(forms: tuple[str, str], rng: np.random.Generator) -> tuple[list[dict], dict[str, Any]]:
     """Two forms flown together, in the flight of the first (the second acts everywhere).
 
+    A form with the distance offset is paired with a second vertical effect (a steady force,
+    a thrust scale) whose far-field look-alike is the offset curve's tail; such a pair also
+    flies the second form's own flight, away from the surface, for :data:`AWAY_DURATION`
+    (the fly keyword ``away``), and discovery reads both logs, as a user would fly both.
+
     The near-ground and near-ceiling surveys fly a PID with integral action
     (:data:`discovery.scenarios.SCENARIOS`), so a second effect's steady vertical force (a
     thrust scale of 0.85 to 1.15, a steady force of up to 0.5 N) does not shift them off the
     planned distances.
     """
     first, fly_kwargs = draw(forms[0], rng)
-    second, _ = draw(forms[1], rng)
+    second, second_kwargs = draw(forms[1], rng)
     if first["name"] == "wall_suction" and second["name"] == "constant_force":
         second["params"]["F"][0] = abs(second["params"]["F"][0])  # a breeze off the wall (x = 0, normal +x)
+    if forms[0].endswith("_offset"):  # the second effect's own flight, away from the surface, as a second log
+        fly_kwargs = {**fly_kwargs, "away": {**second_kwargs, "duration": AWAY_DURATION}}
     return [first, second], fly_kwargs
 
 
@@ -152,12 +163,20 @@ def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int,
 
     fly_kwargs = dict(fly_kwargs)
     duration = max(duration, fly_kwargs.pop("min_duration", 0.0))
-    log, summary = fly(None, "pid", spec(effects), seed, None, duration=duration, rate_hz=rate_hz, **fly_kwargs)
-    if summary["terminated"]:  # the PID hit a surface: no log to judge discovery by
-        return {"flown": effects, "ended_early": True, "collisions": summary["collisions"],
-                "duration_s": summary["duration_s"], "rate_hz": rate_hz, "seed": seed}
+    away = fly_kwargs.pop("away", None)
+    flights = [(seed, {**fly_kwargs, "duration": duration})]
+    if away is not None:
+        flights.append((seed + _AWAY_SEED, dict(away)))
+    logs, collisions = [], 0
+    for flight_seed, kwargs in flights:
+        log, summary = fly(None, "pid", spec(effects), flight_seed, None, rate_hz=rate_hz, **kwargs)
+        collisions += summary["collisions"]
+        if summary["terminated"]:  # the PID hit a surface: no log to judge discovery by
+            return {"flown": effects, "ended_early": True, "collisions": collisions,
+                    "duration_s": summary["duration_s"], "rate_hz": rate_hz, "seed": seed}
+        logs.append(log)
     started = time.perf_counter()
-    found = Discovery().fit(log)
+    found = Discovery().fit(logs)
     runtime = time.perf_counter() - started
     flown = sorted(e["name"] for e in effects)
     named = sorted(found.names_)
@@ -192,7 +211,7 @@ def fly_and_discover(effects: list[dict], fly_kwargs: dict[str, Any], seed: int,
             "spurious": sorted(set(named) - set(flown)), "missed": sorted(set(flown) - set(named)),
             "param_errors": errors, "param_errors_in_std": sigmas, "gap_reduction": 1.0 - after / before if before else None,
             "gap_before_N": before, "gap_after_N": after, "rate_hz": rate_hz, "seed": seed,
-            "samples": log.n_samples, "collisions": summary["collisions"], "runtime_s": runtime,
+            "samples": sum(log.n_samples for log in logs), "collisions": collisions, "runtime_s": runtime,
             "undetermined": [f"{c['effect']}.{c['parameter']}" for c in found.undetermined_],
             "forms_left_open": [limit["effects"][0] for limit in found.limits_ if "[" in limit["effects"][0]],
             "alike": [f"{a['chosen']}~{a['alike']}" for a in found.selection_.alike] if found.selection_ else []}

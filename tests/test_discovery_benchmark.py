@@ -83,6 +83,27 @@ def test_a_ground_offset_flight_comes_down_to_its_planned_height_and_determines_
     assert all(e is not None and e <= 0.10 for e in record["param_errors"].values()), record["param_errors"]
 
 
+def test_a_ground_offset_paired_with_a_steady_force_is_determined_with_the_away_flight():
+    """Near the ground alone the offset curve's tail and a steady vertical force trade against each other: on
+    this 50 Hz pair (a draw of seed 17) the 360 s flight leaves the offset more than 10 % off. The acceptance
+    also flies the steady force's own survey, away from the ground, for 120 s; read with it, the offset is
+    within 10 %."""
+    from discovery.hidden_effects import AWAY_DURATION, fly_and_discover
+
+    effects, flight = draw_pair(("ground_effect_offset", "constant_force"), np.random.default_rng(0))
+    effects[0]["params"] = {"radius": 0.0689, "offset": 0.0291}
+    effects[1]["params"] = {"F": [0.343, 0.223, -0.286]}
+    assert flight["away"] == {"scenario": "survey", "duration": AWAY_DURATION} and AWAY_DURATION == 120.0
+    near = {k: v for k, v in flight.items() if k != "away"}
+    alone = fly_and_discover(effects, near, seed=134686, rate_hz=50.0)
+    both = fly_and_discover(effects, flight, seed=134686, rate_hz=50.0)
+    for record in (alone, both):
+        assert not record["ended_early"] and record["named_right"] and record["form_right"]
+    assert alone["param_errors"]["ground_effect.offset"] > 0.10
+    assert both["samples"] == alone["samples"] + 50 * AWAY_DURATION
+    assert all(e is not None and e <= 0.10 for e in both["param_errors"].values()), both["param_errors"]
+
+
 def _under_the_ceiling(effects: str, survey: dict, gains: dict, seed: int, duration: float,
                        rate_hz: float) -> tuple[int, bool, float]:
     """Fly the ceiling survey (ceiling at 2 m) with ``survey`` and PID ``gains``: collisions, whether the flight
