@@ -125,6 +125,11 @@ class FlightData:
     def n_samples(self) -> int:
         return sum(s.n for s in self.segments)
 
+    @property
+    def weight(self) -> float:
+        """The vehicle's weight (N) under the logs' gravity (their mean, should logs give different values)."""
+        return self.vehicle.mass * float(np.mean([s.gravity for s in self.segments]))
+
     def model_force(self, model: AeroModel) -> list[np.ndarray]:
         """``K[F_M]`` per segment for ``model`` at its current parameters."""
         out = []

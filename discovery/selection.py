@@ -61,7 +61,6 @@ from scipy.special import chdtri
 from discovery.fitting import EffectFit, FitResult, applicable
 from discovery.residuals import FlightData
 from wall_env.effects import Effect, make_effect
-from wall_env.vehicle import GRAVITY
 
 __all__ = ["ALPHA", "MIN_SHARE", "MIN_WEIGHT_SHARE", "VARIANTS", "Candidate", "Step", "Selection", "effective_samples",
            "parameter_price", "score",
@@ -228,7 +227,7 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     steps: list[Step] = []
     alike: list[dict] = []
 
-    floor = (MIN_WEIGHT_SHARE * data.vehicle.mass * GRAVITY) ** 2  # N^2
+    floor = (MIN_WEIGHT_SHARE * data.weight) ** 2  # N^2
 
     def material(better: Candidate, worse: Candidate) -> bool:
         """``better`` explains at least MIN_SHARE of the force-gap energy that ``worse`` leaves, and at least

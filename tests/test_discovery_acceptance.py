@@ -20,7 +20,6 @@ from discovery.selection import MIN_SHARE, MIN_WEIGHT_SHARE
 from discovery.workflow import Discovery
 from tests.discovery_support import draw_hidden_effect, effect_spec, relative_errors
 from wall_env.effects import EFFECTS
-from wall_env.vehicle import GRAVITY
 from wall_inspector.cli import main
 
 pytestmark = pytest.mark.slow
@@ -100,7 +99,7 @@ def test_a_quiet_clean_log_names_no_effect_worth_less_than_its_force_floor():
     first = found.selection_.steps[0]
     scale = next(r for r in first.tried if r["name"] == "thrust_scale")
     explained_N = np.sqrt(first.mse_before - scale["cv_mse_N2"])
-    weight_N = 1.0 * GRAVITY  # the default vehicle's
+    weight_N = log.vehicle.mass * log.gravity
     assert scale["score"] < found.selection_.nominal.score  # it pays for its parameter ...
     assert scale["gain"] >= MIN_SHARE  # ... and takes a share of the gap ...
     assert 0.0 < explained_N < MIN_WEIGHT_SHARE * weight_N  # ... but not a material force
