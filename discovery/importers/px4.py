@@ -15,8 +15,9 @@ collective command       ``vehicle_thrust_setpoint`` -xyz[2] (``vehicle_rates_  
                          setpoint`` -thrust_body[2] or thrust;
                          ``actuator_controls_0`` control[3])
 motor commands           ``actuator_motors`` control[0..3] (``actuator_outputs``     normalised, 0..1
-                         output[0..3], PWM scaled by PWM_MAIN_MIN/MAX or
-                         PWM_MIN/MAX, default 1000..2000 us)
+                         output[0..3], PWM scaled by PWM_MAIN_MINn/MAXn,
+                         PWM_MAIN_MIN/MAX or PWM_MIN/MAX,
+                         default 1000..2000 us)
 =======================  ==========================================================  =====================
 
 Signals are resampled onto one clock (:mod:`discovery.importers.resample`; default
@@ -85,10 +86,13 @@ class _Topics:
         inside = (t >= 0) & (t <= (float(self.ulog.last_timestamp) - float(self.start)) * 1e-6)  # no stale stamps
         return Signal(name, t[inside], values[inside])
 
-    def parameter(self, *names: str) -> float | None:
+    def parameter(self, *names: str, positive: bool = False) -> float | None:
+        """The first of ``names`` the log sets (with ``positive``, the first above 0: PX4 writes -1 for unset)."""
         for name in names:
             if name in self.ulog.initial_parameters:
-                return float(self.ulog.initial_parameters[name])
+                value = float(self.ulog.initial_parameters[name])
+                if value > 0 or not positive:
+                    return value
         return None
 
 
@@ -103,18 +107,30 @@ def _first(topics: _Topics, options: list[tuple[str, list[str], float]], what: s
 
 
 def _motor_signal(topics: _Topics) -> tuple[Signal, str] | None:
+    """The motor commands (0..1) and their source, or None when no motor topic has 2 samples in the log."""
     fields = [f"control[{j}]" for j in range(_MOTORS)]
     if topics.has("actuator_motors", *fields):
-        return topics.signal("motor commands", "actuator_motors", fields), "actuator_motors.control[0..3]"
+        signal = topics.signal("motor commands", "actuator_motors", fields)
+        if len(signal.t) >= 2:
+            return signal, "actuator_motors.control[0..3]"
     fields = [f"output[{j}]" for j in range(_MOTORS)]
     if topics.has("actuator_outputs", *fields):
-        pwm_min = topics.parameter("PWM_MAIN_MIN1", "PWM_MAIN_MIN", "PWM_MIN") or 1000.0
-        pwm_max = topics.parameter("PWM_MAIN_MAX1", "PWM_MAIN_MAX", "PWM_MAX") or 2000.0
         raw = topics.signal("motor commands", "actuator_outputs", fields)
-        scaled = np.clip((raw.values - pwm_min) / (pwm_max - pwm_min), 0.0, 1.0)
+        if len(raw.t) < 2:
+            return None
+        limits = np.array([_pwm_limits(topics, j + 1) for j in range(_MOTORS)])  # (motors, 2) us
+        scaled = np.clip((raw.values - limits[:, 0]) / (limits[:, 1] - limits[:, 0]), 0.0, 1.0)
+        ranges = {f"{low:g}..{high:g}" for low, high in limits}
         return (Signal("motor commands", raw.t, scaled),
-                f"actuator_outputs.output[0..3] (PWM {pwm_min:g}..{pwm_max:g} us)")
+                f"actuator_outputs.output[0..3] (PWM {', '.join(sorted(ranges))} us)")
     return None
+
+
+def _pwm_limits(topics: _Topics, channel: int) -> tuple[float, float]:
+    """PWM range (us) of output ``channel`` (1-based): its own limits, else the shared ones, else 1000..2000."""
+    low = topics.parameter(f"PWM_MAIN_MIN{channel}", "PWM_MAIN_MIN", "PWM_MIN", positive=True) or 1000.0
+    high = topics.parameter(f"PWM_MAIN_MAX{channel}", "PWM_MAIN_MAX", "PWM_MAX", positive=True) or 2000.0
+    return (low, high) if high > low else (1000.0, 2000.0)
 
 
 def read_ulog(path: str | Path, vehicle: NominalVehicle, scene: Scene, gravity: float, *,
@@ -214,7 +230,8 @@ def _thrust_map(topics: _Topics, vehicle: NominalVehicle, gravity: float, t: np.
     airborne = None
     if topics.has("vehicle_land_detected", "landed"):
         landed = topics.signal("landed", "vehicle_land_detected", ["landed"])
-        airborne = hold(landed, t)[:, 0] < 0.5
+        if len(landed.t):  # its only sample may be stamped before the log starts
+            airborne = hold(landed, t)[:, 0] < 0.5
     fit = fit_thrust_map(t, p_world, v_world, R, command, kind, vehicle.mass, gravity, airborne)
     if fit.thrust_map is not None:
         return fit.thrust_map, fit.note

@@ -130,6 +130,11 @@ def interpolate_attitude(signal: Signal, t: np.ndarray) -> np.ndarray:
 
 
 def hold(signal: Signal, t: np.ndarray) -> np.ndarray:
-    """The latest sample at or before each ``t`` (the first sample before the signal starts)."""
+    """The latest sample at or before each ``t`` (the first sample before the signal starts).
+
+    A signal without samples is a ValueError naming it.
+    """
+    if len(signal.t) == 0:
+        raise ValueError(f"signal {signal.name!r} has no usable samples to hold")
     index = np.clip(np.searchsorted(signal.t, t, side="right") - 1, 0, len(signal.t) - 1)
     return signal.values[index]
