@@ -71,6 +71,34 @@ def test_thrust_map_is_fitted_on_hover_samples():
     # too little hover: no map, and the note says why
     short = fit_thrust_map(t[:250], p[:250], v[:250], R[:250], u[:250], "motor_command", mass, g)
     assert short.thrust_map is None and "needs at least 1 s" in short.note
+    # a command that does not carry the weight (half the steady samples at twice the command): no map
+    erratic = u.copy()
+    erratic[(t >= 2.0) & (np.arange(n) % 2 == 0)] *= 2.0
+    bad = fit_thrust_map(t, p, v, R, erratic, "motor_command", mass, g)
+    assert bad.thrust_map is None and bad.relative_rms > 0.1 and "at most 10 %" in bad.note
+
+
+def test_pwm_limits_px4_leaves_unset_fall_back_to_the_shared_ones(vehicle_and_scene, monkeypatch):
+    """PX4 writes -1 for a channel's PWM limit it leaves to PWM_MIN/PWM_MAX (seen in pyulog's sample_log_small.ulg)."""
+    import pyulog
+
+    class UnsetChannelLimits(pyulog.ULog):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            for j in range(1, 9):
+                self.initial_parameters[f"PWM_MAIN_MIN{j}"] = -1
+                self.initial_parameters[f"PWM_MAIN_MAX{j}"] = -1
+            self.initial_parameters["PWM_MAIN_MIN2"] = 1100
+            outputs = next(d for d in self.data_list if d.name == "actuator_outputs" and d.multi_id == 0).data
+            outputs["output[0]"][:] = 1075 + 0.5 * (1950 - 1075)  # half way on each channel's own range
+            outputs["output[1]"][:] = 1100 + 0.5 * (1950 - 1100)
+
+    monkeypatch.setattr(pyulog, "ULog", UnsetChannelLimits)
+    log, info = import_log(GROUND, *vehicle_and_scene)
+    # the log's PWM_MIN/PWM_MAX are 1075/1950 us; channel 2 has its own minimum
+    assert info["signals"]["motor_commands"] == "actuator_outputs.output[0..3] (PWM 1075..1950, 1100..1950 us)"
+    commands = log.rotor_thrusts[:, :2] / log.vehicle.thrust_map.coefficient
+    assert np.allclose(commands, 0.5, atol=1e-6)
 
 
 # ---------------------------------------------------------------------- PX4
@@ -141,6 +169,41 @@ def test_discover_asks_for_vehicle_and_scene_for_a_ulog(tmp_path, capsys):
     assert main(["discover", str(SITL), "--out", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--vehicle VEHICLE.yaml --scene SCENE.yaml" in err[0]
+
+
+def test_topics_stamped_before_the_log_starts_are_left_out(vehicle_and_scene, monkeypatch):
+    """A land detector or motor topic whose only samples predate the log's start (seen in pyulog's
+    sample_appended_multiple.ulg) is left out instead of crashing the import."""
+    import pyulog
+
+    def stale(*names):
+        class StaleStamps(pyulog.ULog):
+            def __init__(self, *args, **kwargs):
+                super().__init__(*args, **kwargs)
+                for d in self.data_list:
+                    if d.name in names:
+                        for key in ("timestamp", "timestamp_sample"):
+                            if key in d.data:
+                                d.data[key] = np.full_like(d.data[key], self.start_timestamp // 2)
+        return StaleStamps
+
+    monkeypatch.setattr(pyulog, "ULog", stale("vehicle_land_detected", "actuator_motors"))
+    _, info = import_log(SITL, *vehicle_and_scene)
+    assert info["signals"]["motor_commands"].startswith("actuator_outputs.output[0..3]")  # the older topic
+    monkeypatch.setattr(pyulog, "ULog", stale("vehicle_land_detected", "actuator_motors", "actuator_outputs"))
+    log, info = import_log(SITL, *vehicle_and_scene)
+    assert info["signals"]["motor_commands"] is None
+    # no motor commands: the collective map from MPC_THR_HOVER = 0.5, k = m g / 0.5
+    assert log.vehicle.thrust_map.kind == "collective"
+    assert log.vehicle.thrust_map.coefficient == pytest.approx(1.5 * 9.81 / 0.5)
+    assert log.rotor_thrusts is None and np.all(np.isfinite(log.thrust_cmd))
+
+
+def test_holding_a_signal_without_samples_names_it():
+    from discovery.importers.resample import Signal, hold
+
+    with pytest.raises(ValueError, match="'landed' has no usable samples"):
+        hold(Signal("landed", np.zeros(0), np.zeros((0, 1))), np.linspace(0.0, 1.0, 5))
 
 
 def test_a_damaged_ulog_is_a_clear_error(vehicle_and_scene, tmp_path):

@@ -11,9 +11,11 @@ proportional to rotor speed). ``k`` is the least-squares slope through the origi
 Hover samples are those where the vehicle is airborne and steady: speed below
 0.3 m/s, acceleration below 0.7 m/s^2, tilt below 15 degrees, the command above
 5 % (the rotors turn) and the vehicle off the ground: at least 0.1 m above the
-ground (the median height while the log's own land detector says landed, else the
-lowest point of the log) and, where the log has a land detector, not landed. At
-least one second of them is needed. Hover alone cannot
+ground (the median height while the log's own land detector says landed; without
+one, while the rotors are stopped; else the lowest point of the log) and, where the
+log has a land detector, not landed. At
+least one second of them is needed, and the weight balance must hold on them to
+10 % of the weight (rms); else no map is fitted and the note says why. Hover alone cannot
 tell ``u`` from ``u^2`` (one operating point): the kind is the user's choice.
 """
 
@@ -33,7 +35,8 @@ HOVER_ACCELERATION = 0.7  # m/s^2
 HOVER_TILT_DEG = 15.0
 MIN_COMMAND = 0.05
 MIN_HOVER_S = 1.0
-MIN_HEIGHT = 0.1  # m above the lowest point of the log
+MAX_BALANCE_RMS = 0.1  # of the weight: a worse weight balance is not a hover the map can be read from
+MIN_HEIGHT = 0.1  # m above the ground height (see the module text)
 
 
 @dataclass
@@ -57,12 +60,18 @@ def hover_mask(t: np.ndarray, p_world: np.ndarray, v_world: np.ndarray, R_body_t
                command: np.ndarray, airborne: np.ndarray | None = None) -> np.ndarray:
     """Samples where the vehicle is airborne and steady (see the module text)."""
     a = _acceleration(t, v_world)
-    ground = np.min(p_world[:, 2]) if airborne is None or airborne.all() else np.median(p_world[~airborne, 2])
+    turning = np.min(np.atleast_2d(command.T).T, axis=1) > MIN_COMMAND
+    if airborne is not None and not airborne.all():
+        ground = np.median(p_world[~airborne, 2])
+    elif (~turning).sum() >= 2:  # rotors stopped: on the ground (a spin-up there is no hover)
+        ground = np.median(p_world[~turning, 2])
+    else:
+        ground = np.min(p_world[:, 2])
     lifted = p_world[:, 2] > ground + MIN_HEIGHT
     airborne = lifted if airborne is None else airborne & lifted
     tilt = np.degrees(np.arccos(np.clip(R_body_to_world[:, 2, 2], -1.0, 1.0)))
     return (airborne & (np.linalg.norm(v_world, axis=1) < HOVER_SPEED) & (np.linalg.norm(a, axis=1) < HOVER_ACCELERATION)
-            & (tilt < HOVER_TILT_DEG) & (np.min(np.atleast_2d(command.T).T, axis=1) > MIN_COMMAND))
+            & (tilt < HOVER_TILT_DEG) & turning)
 
 
 def _basis(command: np.ndarray, kind: str) -> np.ndarray:
@@ -93,5 +102,9 @@ def fit_thrust_map(t: np.ndarray, p_world: np.ndarray, v_world: np.ndarray, R_bo
     x, y = x[mask], y[mask]
     k = float(np.dot(x, y) / np.dot(x, x))
     relative = float(np.sqrt(np.mean((y - k * x) ** 2)) / (mass * gravity))
+    if not np.isfinite(k) or k <= 0 or relative > MAX_BALANCE_RMS:
+        return HoverFit(None, hover_s, relative, f"{hover_s:.1f} s of hover whose weight balance does not fit one "
+                        f"thrust map (k = {k:.4g} N, rms {100 * relative:.1f} % of the weight; at most "
+                        f"{100 * MAX_BALANCE_RMS:g} %): the command does not carry the weight there")
     return HoverFit(ThrustMap(kind, k, f"fitted on {hover_s:.1f} s of hover"), hover_s, relative,
                     f"fitted on {hover_s:.1f} s of hover: weight balance rms {100 * relative:.1f} % of the weight")
