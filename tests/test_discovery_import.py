@@ -272,6 +272,103 @@ def test_ros2_bag_imports_with_the_default_topic_map(vehicle_and_scene, tmp_path
     assert yaw == pytest.approx(np.full(log.n_samples, truth["yaw"]))
 
 
+_PX4_MSGS = {  # the fields of px4_msgs this import reads (PX4's uXRCE-DDS bridge)
+    "px4_msgs/msg/VehicleOdometry": "uint64 timestamp\nuint64 timestamp_sample\nuint8 pose_frame\n"
+                                    "float32[3] position\nfloat32[4] q\nuint8 velocity_frame\nfloat32[3] velocity\n"
+                                    "float32[3] angular_velocity\n",
+    "px4_msgs/msg/VehicleThrustSetpoint": "uint64 timestamp\nuint64 timestamp_sample\nfloat32[3] xyz\n",
+    "px4_msgs/msg/VehicleRatesSetpoint": "uint64 timestamp\nfloat32 roll\nfloat32 pitch\nfloat32 yaw\n"
+                                         "float32[3] thrust_body\nbool reset_integral\n",
+}
+
+
+def _write_px4_bag(path: Path, rate_hz: float = 100.0, duration: float = 8.0) -> dict:
+    """An MCAP bag of px4_msgs (NED/FRD, body-frame velocity, normalised thrust) as PX4's ROS 2 bridge writes:
+    1 s on the ground with the rotors stopped, then drifting at 0.2 m/s along body x, 1.5 m up, heading 30 deg
+    east of north, hovering on half thrust. Receive times jitter by up to 4 ms; PX4's sample times do not."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.rosbag2.writer import StoragePlugin
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    for name, text in _PX4_MSGS.items():
+        ts.register(get_types_from_msg(text, name))
+    T = ts.types
+    yaw = math.radians(30.0)
+    q = np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)], dtype=np.float32)  # FRD to NED, w first
+    v_body = np.array([0.2, 0.0, 0.0])
+    v_ned = np.array([0.2 * math.cos(yaw), 0.2 * math.sin(yaw), 0.0])
+    rng = np.random.default_rng(5)
+    f32 = np.float32
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        odom = writer.add_connection("/fmu/out/vehicle_odometry", "px4_msgs/msg/VehicleOdometry", typestore=ts)
+        thrust = writer.add_connection("/fmu/out/vehicle_thrust_setpoint", "px4_msgs/msg/VehicleThrustSetpoint",
+                                       typestore=ts)
+        rates = writer.add_connection("/fmu/out/vehicle_rates_setpoint", "px4_msgs/msg/VehicleRatesSetpoint",
+                                      typestore=ts)
+        for i in range(int(duration * rate_hz)):
+            t = 20.0 + i / rate_hz
+            us = int(round(t * 1e6))
+            receive_ns = int(round(1e9 * (1000.0 + t + rng.uniform(0.0, 0.004))))
+            flying = t >= 21.0
+            p_ned = np.array([0.0, 0.0, -1.5]) + v_ned * (t - 21.0) if flying else np.zeros(3)
+            msg = T["px4_msgs/msg/VehicleOdometry"](
+                timestamp=us + 300, timestamp_sample=us, pose_frame=1, position=p_ned.astype(f32), q=q,
+                velocity_frame=3, velocity=(v_body if flying else np.zeros(3)).astype(f32),
+                angular_velocity=np.zeros(3, dtype=f32))
+            writer.write(odom, receive_ns, ts.serialize_cdr(msg, msg.__msgtype__))
+            if i % 2 == 0:
+                command = np.array([0.0, 0.0, -0.5 if flying else 0.0], dtype=f32)
+                f = T["px4_msgs/msg/VehicleThrustSetpoint"](timestamp=us + 300, timestamp_sample=us, xyz=command)
+                writer.write(thrust, receive_ns, ts.serialize_cdr(f, f.__msgtype__))
+                r = T["px4_msgs/msg/VehicleRatesSetpoint"](timestamp=us, roll=0.01, pitch=-0.02, yaw=0.03,
+                                                           thrust_body=command, reset_integral=False)
+                writer.write(rates, receive_ns, ts.serialize_cdr(r, r.__msgtype__))
+    return {"v_enu": [v_ned[1], v_ned[0], 0.0], "heading_enu": math.radians(60.0)}
+
+
+def test_ros2_px4_msgs_bag_imports_with_only_the_topics(vehicle_and_scene, tmp_path):
+    bag = tmp_path / "px4bag"
+    truth = _write_px4_bag(bag)
+    topics = {"odometry": "/fmu/out/vehicle_odometry", "thrust": "/fmu/out/vehicle_thrust_setpoint",
+              "rates_setpoint": "/fmu/out/vehicle_rates_setpoint"}
+    log, info = import_log(bag, *vehicle_and_scene, topics=topics)
+    assert info["frames"] == "NED world / FRD body converted to ENU world / FLU body"
+    # PX4's sample clock, not the jittering receive times: exactly 100 Hz, no gaps
+    assert log.rate_hz == pytest.approx(100.0, rel=1e-6) and len(log.segments()) == 1
+    flying = log.t >= 1.0 + 0.6  # past the take-off step and the acceleration window
+    # the body-frame (FRD) velocity becomes the ENU world velocity; NED z -1.5 m is 1.5 m up
+    assert log.v_world[flying].mean(axis=0) == pytest.approx(truth["v_enu"], abs=1e-6)
+    assert log.p_world[flying, 2] == pytest.approx(np.full(flying.sum(), 1.5), abs=1e-6)
+    heading = np.arctan2(log.R_body_to_world[:, 1, 0], log.R_body_to_world[:, 0, 0])
+    assert heading == pytest.approx(np.full(log.n_samples, truth["heading_enu"]), abs=1e-6)
+    # FRD rate commands in FLU: y and z change sign
+    assert log.omega_cmd_body[flying].mean(axis=0) == pytest.approx([0.01, 0.02, -0.03], abs=1e-6)
+    # -xyz[2] is the normalised collective; hover on 0.5 holds 1.5 kg: k = m g / 0.5
+    assert log.vehicle.thrust_map.kind == "collective"
+    assert log.vehicle.thrust_map.coefficient == pytest.approx(1.5 * 9.81 / 0.5, rel=1e-3)
+    assert log.thrust_cmd[flying] == pytest.approx(np.full(flying.sum(), 1.5 * 9.81), rel=1e-3)
+
+
+def test_ros2_topic_map_fields_take_indices_lists_and_scales(vehicle_and_scene, tmp_path):
+    bag = tmp_path / "px4bag"
+    _write_px4_bag(bag, duration=4.0)
+    topics = {"odometry": "/fmu/out/vehicle_odometry",
+              "thrust": {"topic": "/fmu/out/vehicle_rates_setpoint", "field": "thrust_body[2]", "scale": -1.0},
+              "rates_setpoint": {"topic": "/fmu/out/vehicle_rates_setpoint", "field": ["roll", "yaw", "pitch"]},
+              "thrust_unit": "normalised"}
+    log, _ = import_log(bag, *vehicle_and_scene, topics=topics)
+    flying = log.t >= 1.6
+    # (roll, yaw, pitch) in FRD, (0.01, 0.03, -0.02), is (0.01, -0.03, 0.02) in FLU
+    assert log.omega_cmd_body[flying].mean(axis=0) == pytest.approx([0.01, -0.03, 0.02], abs=1e-6)
+    assert log.vehicle.thrust_map.coefficient == pytest.approx(1.5 * 9.81 / 0.5, rel=1e-3)
+    for bad, match in [({"field": "xyz[7]"}, "has no index 7"), ({"field": "x-y"}, "is not a name or name"),
+                       ({"scale": 0}, r"thrust.scale must be a finite non-zero number")]:
+        entry = {"topic": "/fmu/out/vehicle_thrust_setpoint", **bad}
+        with pytest.raises((LogFormatError, ValueError), match=match):
+            import_log(bag, *vehicle_and_scene, topics={**topics, "thrust": entry})
+
+
 def test_ros2_topic_map_errors_name_the_key(vehicle_and_scene, tmp_path):
     bag = tmp_path / "bag"
     _write_bag(bag, duration=1.0)

@@ -1,8 +1,10 @@
 """ROS 2 bags (SQLite3 or MCAP storage) as flight logs, read with ``rosbags``.
 
 Which topic holds what comes from a small topic map (a YAML file or a dict). Each
-entry is a topic name, or ``{topic: NAME, field: dotted.path}`` to pick a field of the
-message (the default field depends on the message type, see :data:`DEFAULT_FIELDS`)::
+entry is a topic name, or ``{topic: NAME, field: PATH, scale: NUMBER}`` to pick a field
+of the message (``field`` a dotted path with optional indices, e.g. ``xyz[2]``, or a
+list of paths, e.g. ``[roll, pitch, yaw]``; ``scale`` multiplies the values; the default
+field depends on the message type, see :data:`DEFAULT_FIELDS`)::
 
     odometry: /vehicle/odom         # nav_msgs/msg/Odometry: pose (world) and twist (body frame)
     # or, from motion capture:
@@ -14,13 +16,28 @@ message (the default field depends on the message type, see :data:`DEFAULT_FIELD
     frame: enu                      # or ned (world NED and body FRD, as px4_msgs write them)
     odometry_twist_frame: body      # or world
 
+PX4 through its ROS 2 bridge (``px4_msgs``, with the message definitions the bag
+carries, as MCAP and recent SQLite3 bags do) needs only the topics::
+
+    odometry: /fmu/out/vehicle_odometry              # px4_msgs/msg/VehicleOdometry
+    thrust: /fmu/out/vehicle_thrust_setpoint         # px4_msgs/msg/VehicleThrustSetpoint: -xyz[2]
+    rates_setpoint: /fmu/out/vehicle_rates_setpoint  # px4_msgs/msg/VehicleRatesSetpoint
+
+With a ``px4_msgs`` odometry ``frame`` defaults to ``ned``, its velocity is taken in the
+frame its ``velocity_frame`` names, and with a ``px4_msgs`` thrust setpoint
+``thrust_unit`` defaults to ``normalised``.
+
 Times are the messages' header stamps where they have one, else the bag's receive
-times, relative to the first sample. Signals are resampled onto one clock (default:
-the odometry or pose rate, clipped to 50..1000 Hz); gaps stay gaps.
+times, relative to the first sample; when every topic is a ``px4_msgs`` message, their
+``timestamp_sample`` (else ``timestamp``, PX4's clock) is used instead. Signals are
+resampled onto one clock (default: the odometry or pose rate, clipped to 50..1000 Hz);
+gaps stay gaps.
 """
 
 from __future__ import annotations
 
+import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -39,18 +56,26 @@ from discovery.importers.thrust_map import apply_thrust_map, fit_thrust_map
 
 __all__ = ["DEFAULT_FIELDS", "TOPIC_KEYS", "read_bag", "read_topic_map", "is_bag"]
 
-DEFAULT_FIELDS = {
-    "std_msgs/msg/Float32": "data",
-    "std_msgs/msg/Float64": "data",
-    "geometry_msgs/msg/Vector3Stamped": "vector",
-    "geometry_msgs/msg/Vector3": "",
-    "geometry_msgs/msg/TwistStamped": "twist.angular",
-    "sensor_msgs/msg/Imu": "angular_velocity",
+DEFAULT_FIELDS: dict[str, tuple[str | list[str], float]] = {  # message type: (field path(s), scale)
+    "std_msgs/msg/Float32": ("data", 1.0),
+    "std_msgs/msg/Float64": ("data", 1.0),
+    "geometry_msgs/msg/Vector3Stamped": ("vector", 1.0),
+    "geometry_msgs/msg/Vector3": ("", 1.0),
+    "geometry_msgs/msg/TwistStamped": ("twist.angular", 1.0),
+    "sensor_msgs/msg/Imu": ("angular_velocity", 1.0),
+    "px4_msgs/msg/VehicleThrustSetpoint": ("xyz[2]", -1.0),  # FRD: upward thrust is -z
+    "px4_msgs/msg/VehicleRatesSetpoint": (["roll", "pitch", "yaw"], 1.0),
+    "px4_msgs/msg/VehicleAngularVelocity": ("xyz", 1.0),
 }
 TOPIC_KEYS = ("odometry", "pose", "body_rates", "thrust", "rates_setpoint")
 _OPTIONS = {"thrust_unit": ("newton", "normalised"), "frame": ("enu", "ned"),
             "odometry_twist_frame": ("body", "world")}
+_AUTO = {"thrust_unit", "frame"}  # left out, these follow the message types (px4_msgs: normalised, ned)
+_PX4 = "px4_msgs/"
+_PX4_ODOMETRY = "px4_msgs/msg/VehicleOdometry"
+_PX4_BODY_FRD = 3  # VehicleOdometry.velocity_frame of a body-frame velocity
 MIN_RATE_HZ, MAX_RATE_HZ = 50.0, 1000.0
+_PART = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?")
 
 
 def is_bag(path: str | Path) -> bool:
@@ -72,7 +97,7 @@ def read_topic_map(source: str | Path | dict | None) -> dict[str, Any]:
     unknown = sorted(set(data) - set(TOPIC_KEYS) - set(_OPTIONS))
     if unknown:
         raise ValueError(f"topic map: unknown key(s) {unknown}; allowed: {list(TOPIC_KEYS) + list(_OPTIONS)}")
-    out: dict[str, Any] = {k: default[0] for k, default in _OPTIONS.items()}
+    out: dict[str, Any] = {k: None if k in _AUTO else default[0] for k, default in _OPTIONS.items()}
     for key, allowed in _OPTIONS.items():
         if key in data:
             if data[key] not in allowed:
@@ -84,9 +109,17 @@ def read_topic_map(source: str | Path | dict | None) -> dict[str, Any]:
             continue
         if isinstance(entry, str):
             entry = {"topic": entry}
+        field = entry.get("field", "") if isinstance(entry, dict) else None
+        fields_ok = isinstance(field, str) or (isinstance(field, list) and field and
+                                               all(isinstance(f, str) for f in field))
         if not isinstance(entry, dict) or not isinstance(entry.get("topic"), str) or \
-                not set(entry) <= {"topic", "field"} or not isinstance(entry.get("field", ""), str):
-            raise ValueError(f"topic map: {key} must be a topic name or {{topic: NAME, field: PATH}}, got {entry!r}")
+                not set(entry) <= {"topic", "field", "scale"} or not fields_ok:
+            raise ValueError(f"topic map: {key} must be a topic name or {{topic: NAME, field: PATH or [PATH, ...], "
+                             f"scale: NUMBER}}, got {entry!r}")
+        if "scale" in entry:
+            scale = entry["scale"]
+            if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
+                raise ValueError(f"topic map: {key}.scale must be a finite non-zero number, got {scale!r}")
         out[key] = entry
     if ("odometry" in out) == ("pose" in out):
         raise ValueError("topic map: give exactly one of 'odometry' and 'pose'")
@@ -97,8 +130,17 @@ def read_topic_map(source: str | Path | dict | None) -> dict[str, Any]:
 
 
 def _field(message: Any, path: str) -> Any:
+    """``message``'s field at a dotted ``path`` whose parts may be indexed (``xyz[2]``)."""
     for part in filter(None, path.split(".")):
-        message = getattr(message, part)
+        match = _PART.fullmatch(part)
+        if match is None:
+            raise AttributeError(f"field path {path!r}: {part!r} is not a name or name[index]")
+        message = getattr(message, match.group(1))
+        if match.group(2) is not None:
+            try:
+                message = message[int(match.group(2))]
+            except (IndexError, TypeError):
+                raise AttributeError(f"field path {path!r}: {match.group(1)} has no index {match.group(2)}") from None
     return message
 
 
@@ -117,6 +159,15 @@ def _stamp(message: Any, receive_ns: int) -> float:
     return receive_ns * 1e-9
 
 
+def _px4_stamp(message: Any) -> float | None:
+    """A px4_msgs message's sample time on PX4's clock (s), or None."""
+    for name in ("timestamp_sample", "timestamp"):
+        value = getattr(message, name, 0)
+        if value:
+            return float(value) * 1e-6
+    return None
+
+
 def _collect(path: Path, topic_map: dict[str, Any]) -> dict[str, tuple[np.ndarray, list[list[float]], str]]:
     """Every wanted topic's (times, value rows, message type)."""
     try:
@@ -124,11 +175,13 @@ def _collect(path: Path, topic_map: dict[str, Any]) -> dict[str, tuple[np.ndarra
         from rosbags.typesys import Stores, get_typestore
     except ImportError:  # pragma: no cover - a declared dependency
         raise ImportError("reading ROS 2 bags needs rosbags (pip install rosbags)") from None
-    wanted: dict[str, list[tuple[str, str]]] = {}  # topic -> [(key, field)]
+    wanted: dict[str, list[tuple[str, Any, float | None]]] = {}  # topic -> [(key, field, scale)]
     for key in TOPIC_KEYS:
         if key in topic_map:
-            wanted.setdefault(topic_map[key]["topic"], []).append((key, topic_map[key].get("field")))
+            entry = topic_map[key]
+            wanted.setdefault(entry["topic"], []).append((key, entry.get("field"), entry.get("scale")))
     found: dict[str, tuple[list[float], list[list[float]], str]] = {}
+    px4_times: dict[str, list[float | None]] = {}
     try:
         with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
             present = {c.topic: c.msgtype for c in reader.connections}
@@ -140,33 +193,51 @@ def _collect(path: Path, topic_map: dict[str, Any]) -> dict[str, tuple[np.ndarra
             for connection, receive_ns, raw in reader.messages(connections=connections):
                 message = reader.deserialize(raw, connection.msgtype)
                 t = _stamp(message, receive_ns)
-                for key, field in wanted[connection.topic]:
-                    rows = _rows(key, field, message, connection.msgtype, path)
+                for key, field, scale in wanted[connection.topic]:
+                    rows = _rows(key, field, scale, message, connection.msgtype, path)
                     times, values, _ = found.setdefault(key, ([], [], connection.msgtype))
                     times.append(t)
                     values.append(rows)
+                    px4_times.setdefault(key, []).append(
+                        _px4_stamp(message) if connection.msgtype.startswith(_PX4) else None)
     except LogFormatError:
         raise
     except Exception as exc:  # noqa: BLE001 - rosbags raises assorted errors for damaged or unknown bags
         raise LogFormatError(f"{path}: not a readable ROS 2 bag ({type(exc).__name__}: {exc})") from None
+    if found and all(all(x is not None for x in px4_times[k]) for k in found):  # one clock: PX4's
+        return {k: (np.asarray(px4_times[k], dtype=float), v, m) for k, (_, v, m) in found.items()}
     return {k: (np.asarray(t), v, m) for k, (t, v, m) in found.items()}
 
 
-def _rows(key: str, field: str | None, message: Any, msgtype: str, path: Path) -> list[float]:
+def _rows(key: str, field: str | list[str] | None, scale: float | None, message: Any, msgtype: str,
+          path: Path) -> list[float]:
     try:
+        if key == "odometry" and msgtype == _PX4_ODOMETRY:
+            q = [float(x) for x in message.q]  # w, x, y, z: FRD body to the NED (or FRD) world
+            velocity = np.asarray(message.velocity, dtype=float)
+            if int(message.velocity_frame) == _PX4_BODY_FRD:
+                velocity = quaternions_to_matrices(np.asarray([q]))[0] @ velocity
+            return ([float(x) for x in message.position] + q + velocity.tolist()
+                    + [float(x) for x in message.angular_velocity])
         if key == "odometry":
             pose, twist = message.pose.pose, message.twist.twist
             return (_numbers(pose.position) + _numbers(pose.orientation) + _numbers(twist.linear)
                     + _numbers(twist.angular))
         if key == "pose":
+            if isinstance(field, list):
+                raise LogFormatError(f"{path}: topic map 'pose': field must be one path to a geometry_msgs/Pose, "
+                                     f"got {field!r}")
             pose = message.pose if field is None else _field(message, field)
             return _numbers(pose.position) + _numbers(pose.orientation)
         if field is None:
             if msgtype not in DEFAULT_FIELDS:
                 raise LogFormatError(f"{path}: topic map '{key}': message type {msgtype} has no default field; "
                                      f"give one with {{topic: ..., field: ...}}")
-            field = DEFAULT_FIELDS[msgtype]
-        return _numbers(_field(message, field))
+            field, default_scale = DEFAULT_FIELDS[msgtype]
+            scale = default_scale if scale is None else scale
+        paths = field if isinstance(field, list) else [field]
+        numbers = [x for p in paths for x in _numbers(_field(message, p))]
+        return numbers if scale is None else [scale * x for x in numbers]
     except AttributeError as exc:
         raise LogFormatError(f"{path}: topic map '{key}' ({msgtype}): {exc}") from None
 
@@ -193,6 +264,11 @@ def read_bag(path: str | Path, vehicle: NominalVehicle, scene: Any, gravity: flo
         return Signal(key, times - t0, values if columns is None else values[:, columns])
 
     source = "odometry" if "odometry" in topics else "pose"
+    px4_odometry = raw[source][2] == _PX4_ODOMETRY
+    if topics["frame"] is None:
+        topics["frame"] = "ned" if raw[source][2].startswith(_PX4) else "enu"
+    if topics["thrust_unit"] is None:
+        topics["thrust_unit"] = "normalised" if raw["thrust"][2].startswith(_PX4) else "newton"
     position = signal(source, slice(0, 3))
     attitude = signal(source, slice(3, 7))
     if source == "odometry":
@@ -223,7 +299,7 @@ def read_bag(path: str | Path, vehicle: NominalVehicle, scene: Any, gravity: flo
         p, v, q = ned_to_enu(p), ned_to_enu(v), attitude_frd_ned_to_flu_enu(q)
         omega, omega_cmd = frd_to_flu(omega), frd_to_flu(omega_cmd)
     R = quaternions_to_matrices(q)
-    if source == "odometry" and topics["odometry_twist_frame"] == "body":
+    if source == "odometry" and topics["odometry_twist_frame"] == "body" and not px4_odometry:
         v = np.einsum("nij,nj->ni", R, v)
     u = hold(thrust, t)[:, 0]
     note = "thrust logged in newtons"
