@@ -362,6 +362,8 @@ def test_ros2_topic_map_fields_take_indices_lists_and_scales(vehicle_and_scene, 
     # (roll, yaw, pitch) in FRD, (0.01, 0.03, -0.02), is (0.01, -0.03, 0.02) in FLU
     assert log.omega_cmd_body[flying].mean(axis=0) == pytest.approx([0.01, -0.03, 0.02], abs=1e-6)
     assert log.vehicle.thrust_map.coefficient == pytest.approx(1.5 * 9.81 / 0.5, rel=1e-3)
+    with pytest.raises(LogFormatError, match="VehicleOdometry is in PX4's NED/FRD frames; set frame: ned"):
+        import_log(bag, *vehicle_and_scene, topics={**topics, "frame": "enu"})
     for bad, match in [({"field": "xyz[7]"}, "has no index 7"), ({"field": "x-y"}, "is not a name or name"),
                        ({"scale": 0}, r"thrust.scale must be a finite non-zero number")]:
         entry = {"topic": "/fmu/out/vehicle_thrust_setpoint", **bad}

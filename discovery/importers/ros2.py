@@ -267,6 +267,9 @@ def read_bag(path: str | Path, vehicle: NominalVehicle, scene: Any, gravity: flo
     px4_odometry = raw[source][2] == _PX4_ODOMETRY
     if topics["frame"] is None:
         topics["frame"] = "ned" if raw[source][2].startswith(_PX4) else "enu"
+    elif px4_odometry and topics["frame"] != "ned":
+        raise LogFormatError(f"{path}: topic map: {_PX4_ODOMETRY} is in PX4's NED/FRD frames; set frame: ned "
+                             "or leave frame out")
     if topics["thrust_unit"] is None:
         topics["thrust_unit"] = "normalised" if raw["thrust"][2].startswith(_PX4) else "newton"
     position = signal(source, slice(0, 3))
