@@ -282,7 +282,7 @@ _PX4_MSGS = {  # the fields of px4_msgs this import reads (PX4's uXRCE-DDS bridg
 }
 
 
-def _write_px4_bag(path: Path, rate_hz: float = 100.0, duration: float = 8.0) -> dict:
+def _write_px4_bag(path: Path, rate_hz: float = 100.0, duration: float = 8.0, storage: str = "mcap") -> dict:
     """An MCAP bag of px4_msgs (NED/FRD, body-frame velocity, normalised thrust) as PX4's ROS 2 bridge writes:
     1 s on the ground with the rotors stopped, then drifting at 0.2 m/s along body x, 1.5 m up, heading 30 deg
     east of north, hovering on half thrust. Receive times jitter by up to 4 ms; PX4's sample times do not."""
@@ -300,7 +300,8 @@ def _write_px4_bag(path: Path, rate_hz: float = 100.0, duration: float = 8.0) ->
     v_ned = np.array([0.2 * math.cos(yaw), 0.2 * math.sin(yaw), 0.0])
     rng = np.random.default_rng(5)
     f32 = np.float32
-    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=9, storage_plugin=plugin) as writer:
         odom = writer.add_connection("/fmu/out/vehicle_odometry", "px4_msgs/msg/VehicleOdometry", typestore=ts)
         thrust = writer.add_connection("/fmu/out/vehicle_thrust_setpoint", "px4_msgs/msg/VehicleThrustSetpoint",
                                        typestore=ts)
@@ -348,6 +349,20 @@ def test_ros2_px4_msgs_bag_imports_with_only_the_topics(vehicle_and_scene, tmp_p
     assert log.vehicle.thrust_map.kind == "collective"
     assert log.vehicle.thrust_map.coefficient == pytest.approx(1.5 * 9.81 / 0.5, rel=1e-3)
     assert log.thrust_cmd[flying] == pytest.approx(np.full(flying.sum(), 1.5 * 9.81), rel=1e-3)
+
+
+def test_a_bag_without_the_definitions_of_its_custom_types_says_so(vehicle_and_scene, tmp_path):
+    """Humble's SQLite3 bags carry no message definitions: px4_msgs cannot be decoded from them."""
+    import sqlite3
+
+    bag = tmp_path / "px4bag"
+    _write_px4_bag(bag, duration=1.0, storage="sqlite3")
+    with sqlite3.connect(next(bag.glob("*.db3"))) as db:
+        db.execute("DELETE FROM message_definitions")
+    topics = {"odometry": "/fmu/out/vehicle_odometry", "thrust": "/fmu/out/vehicle_thrust_setpoint",
+              "rates_setpoint": "/fmu/out/vehicle_rates_setpoint"}
+    with pytest.raises(LogFormatError, match=r"'px4_msgs/msg/VehicleOdometry'.*does not carry their definitions"):
+        import_log(bag, *vehicle_and_scene, topics=topics)
 
 
 def test_ros2_topic_map_fields_take_indices_lists_and_scales(vehicle_and_scene, tmp_path):

@@ -190,6 +190,11 @@ def _collect(path: Path, topic_map: dict[str, Any]) -> dict[str, tuple[np.ndarra
                 raise LogFormatError(f"{path}: topic(s) {missing} named in the topic map are not in the bag; "
                                      f"it has {sorted(present)}")
             connections = [c for c in reader.connections if c.topic in wanted]
+            unknown = sorted({c.msgtype for c in connections} - set(reader.typestore.fielddefs))
+            if unknown:
+                raise LogFormatError(f"{path}: message type(s) {unknown} are not standard ROS 2 types and the bag "
+                                     "does not carry their definitions; record with MCAP storage (or a ROS 2 "
+                                     "release from Iron on), which stores them")
             for connection, receive_ns, raw in reader.messages(connections=connections):
                 message = reader.deserialize(raw, connection.msgtype)
                 t = _stamp(message, receive_ns)
