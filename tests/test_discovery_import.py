@@ -215,7 +215,10 @@ def test_a_damaged_ulog_is_a_clear_error(vehicle_and_scene, tmp_path):
 
 # ---------------------------------------------------------------------- ROS 2
 def _write_bag(path: Path, rate_hz: float = 100.0, duration: float = 6.0) -> dict:
-    """A bag with odometry (ENU, body-frame twist), a Float64 thrust and Vector3Stamped rate commands."""
+    """A bag with odometry (ENU, body-frame twist), a Float64 thrust and Vector3Stamped rate commands.
+
+    Read in NED/FRD (``frame: ned``), the same numbers are a vehicle at yaw 30 deg east of north whose
+    FRD body twist is (0.5, -0.2, 0.1) m/s: ``truth["v_world_if_ned"]`` is its ENU world velocity."""
     from rosbags.rosbag2 import Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -225,7 +228,9 @@ def _write_bag(path: Path, rate_hz: float = 100.0, duration: float = 6.0) -> dic
     q_xyzw = Rotation.from_euler("z", yaw).as_quat()
     v_body = np.array([0.5, -0.2, 0.1])
     v_world = Rotation.from_euler("z", yaw).apply(v_body)
-    truth = {"v_world": v_world, "yaw": yaw, "thrust": 9.5, "rates": [0.01, -0.02, 0.03]}
+    v_ned = Rotation.from_euler("z", yaw).apply(v_body)  # the same rotation, read as FRD to NED
+    truth = {"v_world": v_world, "yaw": yaw, "thrust": 9.5, "rates": [0.01, -0.02, 0.03],
+             "v_world_if_ned": [v_ned[1], v_ned[0], -v_ned[2]]}
     with Writer(path, version=9) as writer:
         odom = writer.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=ts)
         thrust = writer.add_connection("/thrust", "std_msgs/msg/Float64", typestore=ts)
@@ -384,6 +389,16 @@ def test_ros2_topic_map_fields_take_indices_lists_and_scales(vehicle_and_scene, 
         entry = {"topic": "/fmu/out/vehicle_thrust_setpoint", **bad}
         with pytest.raises((LogFormatError, ValueError), match=match):
             import_log(bag, *vehicle_and_scene, topics={**topics, "thrust": entry})
+
+
+def test_ros2_odometry_in_ned_with_a_body_twist_becomes_the_enu_world_velocity(vehicle_and_scene, tmp_path):
+    """A body-frame twist in FRD turns into FLU before the attitude rotates it into the world."""
+    bag = tmp_path / "bag"
+    truth = _write_bag(bag, duration=1.0)
+    log, _ = import_log(bag, *vehicle_and_scene,
+                        topics={"odometry": "/odom", "thrust": "/thrust", "rates_setpoint": "/rates_setpoint",
+                                "frame": "ned"})
+    assert log.v_world.mean(axis=0) == pytest.approx(truth["v_world_if_ned"], abs=1e-9)
 
 
 def test_ros2_topic_map_errors_name_the_key(vehicle_and_scene, tmp_path):

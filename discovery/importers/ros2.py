@@ -218,12 +218,9 @@ def _rows(key: str, field: str | list[str] | None, scale: float | None, message:
           path: Path) -> list[float]:
     try:
         if key == "odometry" and msgtype == _PX4_ODOMETRY:
-            q = [float(x) for x in message.q]  # w, x, y, z: FRD body to the NED (or FRD) world
-            velocity = np.asarray(message.velocity, dtype=float)
-            if int(message.velocity_frame) == _PX4_BODY_FRD:
-                velocity = quaternions_to_matrices(np.asarray([q]))[0] @ velocity
-            return ([float(x) for x in message.position] + q + velocity.tolist()
-                    + [float(x) for x in message.angular_velocity])
+            # position, q (w, x, y, z: FRD body to the NED world), velocity, body rates, and the velocity's frame
+            return [float(x) for x in (*message.position, *message.q, *message.velocity, *message.angular_velocity,
+                                       message.velocity_frame)]
         if key == "odometry":
             pose, twist = message.pose.pose, message.twist.twist
             return (_numbers(pose.position) + _numbers(pose.orientation) + _numbers(twist.linear)
@@ -277,6 +274,12 @@ def read_bag(path: str | Path, vehicle: NominalVehicle, scene: Any, gravity: flo
                              "or leave frame out")
     if topics["thrust_unit"] is None:
         topics["thrust_unit"] = "normalised" if raw["thrust"][2].startswith(_PX4) else "newton"
+    twist_in_body = source == "odometry" and topics["odometry_twist_frame"] == "body"
+    if px4_odometry:  # each message names its velocity's frame
+        velocity_frames = sorted({int(row[13]) for row in raw[source][1]})
+        if len(velocity_frames) > 1:
+            raise LogFormatError(f"{path}: {_PX4_ODOMETRY}.velocity_frame changes within the bag ({velocity_frames})")
+        twist_in_body = velocity_frames == [_PX4_BODY_FRD]
     position = signal(source, slice(0, 3))
     attitude = signal(source, slice(3, 7))
     if source == "odometry":
@@ -304,10 +307,11 @@ def read_bag(path: str | Path, vehicle: NominalVehicle, scene: Any, gravity: flo
     omega = interpolate(rates, t)
     omega_cmd = hold(rates_cmd, t)
     if topics["frame"] == "ned":
-        p, v, q = ned_to_enu(p), ned_to_enu(v), attitude_frd_ned_to_flu_enu(q)
+        p, q = ned_to_enu(p), attitude_frd_ned_to_flu_enu(q)
+        v = frd_to_flu(v) if twist_in_body else ned_to_enu(v)
         omega, omega_cmd = frd_to_flu(omega), frd_to_flu(omega_cmd)
     R = quaternions_to_matrices(q)
-    if source == "odometry" and topics["odometry_twist_frame"] == "body" and not px4_odometry:
+    if twist_in_body:
         v = np.einsum("nij,nj->ni", R, v)
     u = hold(thrust, t)[:, 0]
     note = "thrust logged in newtons"
