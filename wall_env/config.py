@@ -21,6 +21,7 @@ from wall_env.actions import ActionMapping
 from wall_env.aero import AeroModel
 from wall_env.effects import effects_from_spec, make_effect
 from wall_env.model_file import FlightModel, nominal_aero_model
+from wall_env.motor_lag import MAX_TIME_CONSTANT
 from wall_env.observation import PREVIEW_DT, PREVIEW_STEPS
 from wall_env.references import Reference
 from wall_env.scene import Scene
@@ -190,7 +191,7 @@ class EnvConfig:
             truth = _truth_model(vehicle_params, k_s, d_thr, effects)
         if motor_time_constant is not None:
             vehicle_params = vehicle_params.replace(
-                motor_time_constant=check_range("motor_time_constant", motor_time_constant, 0.0, 1.0))
+                motor_time_constant=check_range("motor_time_constant", motor_time_constant, 0.0, MAX_TIME_CONSTANT))
 
         # ------------------------------------------------------------------ timing, noise, reward
         control_dt = check_range("control_dt", control_dt, 0.001, 0.05)

@@ -11,7 +11,8 @@ does what a flight controller's rate loop does:
 
 1. body-rate controller: ``tau_des = J K (omega_cmd - omega) + omega x J omega``;
 2. mixer: rotor thrusts ``f_des = mixer [T; tau_des]``, clipped to ``[0, thrust_max / 4]``;
-3. optional first-order motor lag ``df/dt = (f_des - f) / tau_m`` (otherwise ``f = f_des``);
+3. optional first-order motor lag ``df/dt = (f_des - f) / tau_m`` (:mod:`wall_env.motor_lag`; otherwise
+   ``f = f_des``);
 4. rigid body (paper Eq. 3 with Eq. 5's extra force):
    ``dp/dt = v``, ``dv/dt = -g e3 + (R e3 sum(f) + F_aero) / m``,
    ``dq/dt = q * [0, omega] / 2``, ``J domega/dt = tau(f) + M_aero - omega x J omega``
@@ -38,6 +39,7 @@ from wall_env.aero import AeroModel, symbolic_scene
 from wall_env.codegen import NATIVE_FLAGS, BatchedFunction, CompiledFunction
 from wall_env.contact import collision_shapes, contact_response
 from wall_env.effects import FlightContext
+from wall_env.motor_lag import thrust_rate
 from wall_env.rotations import quat_multiply, quat_to_rotation
 from wall_env.scene import Scene
 from wall_env.vehicle import GRAVITY, VehicleParams
@@ -84,7 +86,7 @@ def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structu
     f_des = _commanded_rotor_thrusts(vehicle, omega, u)
     if vehicle.motor_time_constant > 0:
         f_act = f
-        f_dot = (f_des - f) / vehicle.motor_time_constant
+        f_dot = thrust_rate(f_des, f, vehicle.motor_time_constant)
     else:
         f_act = f_des
         f_dot = ca.SX.zeros(4)

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from wall_env.motor_lag import MAX_TIME_CONSTANT
 from wall_env.validation import check_positive, check_range, check_vector, read_mapping
 
 __all__ = ["GRAVITY", "VehicleParams"]
@@ -83,7 +84,7 @@ class VehicleParams:
         check_positive("body_rate_max", self.body_rate_max, high=50.0)
         check_range("yaw_moment_coefficient", self.yaw_moment_coefficient, 1e-5, 1.0)
         object.__setattr__(self, "rate_gains", check_vector("rate_gains", self.rate_gains, 3, low=0.1, high=1000.0))
-        check_range("motor_time_constant", self.motor_time_constant, 0.0, 1.0)
+        check_range("motor_time_constant", self.motor_time_constant, 0.0, MAX_TIME_CONSTANT)
 
     # ------------------------------------------------------------------ derived
     @property
