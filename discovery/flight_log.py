@@ -30,7 +30,8 @@ The JSON file::
 
     {"vehicle": {"mass": kg, "rotor_positions": [[x, y, z] x 4] (m, body frame),
                  "drag": [dx, dy, dz] (N s/m, optional, zero if absent),
-                 "thrust_map": {"kind", "coefficient", "source"} (optional, see ThrustMap)},
+                 "thrust_map": {"kind", "coefficient", "source"} (optional, see ThrustMap),
+                 "motor_time_constant": s (optional, zero if absent)},
      "scene": {"walls": [{"point": [x, y, z], "normal": [nx, ny, nz]}, ...],
                "ground_z": number or null, "ceiling_z": number or null},
      "gravity": 9.81}
@@ -38,7 +39,9 @@ The JSON file::
 The vehicle block is the nominal model the user believes in; nothing in it says what
 is missing. ``thrust_map`` records how an imported log's normalised commands became the
 thrust in newtons (:mod:`discovery.importers`); it is information, the CSV's thrust is
-already in newtons.
+already in newtons. ``motor_time_constant`` is the first-order lag of the thrust the rotors
+produce behind the logged thrust (:mod:`wall_env.motor_lag`), when it is known: discovery
+then takes the lagged thrust as what acted, and otherwise looks for a lag itself.
 
 The CSV is UTF-8 (a byte-order mark, as spreadsheets write, is dropped) with ``,``
 between fields; a header separated by ``;``, tabs or ``|`` is rejected with a message
@@ -63,6 +66,7 @@ from typing import Any
 
 import numpy as np
 
+from wall_env.motor_lag import MAX_TIME_CONSTANT
 from wall_env.scene import Scene, Wall
 from wall_env.vehicle import GRAVITY, VehicleParams
 
@@ -138,6 +142,7 @@ class NominalVehicle:
     rotor_positions: tuple[tuple[float, float, float], ...]  # m, 4 x 3, body frame
     drag: tuple[float, float, float] = (0.0, 0.0, 0.0)  # N s/m, body-frame linear drag (paper Eq. 4)
     thrust_map: ThrustMap | None = field(default=None, compare=False)  # how commands became newtons (import)
+    motor_time_constant: float = 0.0  # s, first-order lag of the produced thrust behind the logged one (0: none)
 
     @property
     def rotor_positions_array(self) -> np.ndarray:
@@ -151,18 +156,20 @@ class NominalVehicle:
         """
         thrust_max = 27.0 if self.mass * GRAVITY < 27.0 / 1.2 else 2.0 * self.mass * GRAVITY
         return VehicleParams(mass=self.mass, rotor_positions=self.rotor_positions, drag=self.drag,
-                             thrust_max=thrust_max)
+                             thrust_max=thrust_max, motor_time_constant=self.motor_time_constant)
 
     @classmethod
     def from_vehicle_params(cls, vehicle: VehicleParams) -> NominalVehicle:
         rotors: Any = tuple(tuple(float(c) for c in r) for r in vehicle.rotor_positions)
         drag: Any = tuple(float(c) for c in vehicle.drag)
-        return cls(float(vehicle.mass), rotors, drag)
+        return cls(float(vehicle.mass), rotors, drag, motor_time_constant=float(vehicle.motor_time_constant))
 
     def to_dict(self) -> dict[str, Any]:
         data = {"mass": self.mass, "rotor_positions": [list(r) for r in self.rotor_positions], "drag": list(self.drag)}
         if self.thrust_map is not None:
             data["thrust_map"] = self.thrust_map.to_dict()
+        if self.motor_time_constant > 0:
+            data["motor_time_constant"] = self.motor_time_constant
         return data
 
 
@@ -433,7 +440,8 @@ def _assemble(path: Path, c: dict[str, np.ndarray], vehicle: NominalVehicle, sce
 
 # ---------------------------------------------------------------------- the JSON sidecar
 _SCHEMA_TOP = {"vehicle": True, "scene": True, "gravity": False}  # key -> required
-_SCHEMA_VEHICLE = {"mass": True, "rotor_positions": True, "drag": False, "thrust_map": False}
+_SCHEMA_VEHICLE = {"mass": True, "rotor_positions": True, "drag": False, "thrust_map": False,
+                   "motor_time_constant": False}
 _SCHEMA_THRUST_MAP = {"kind": True, "coefficient": True, "source": False}
 _SCHEMA_SCENE = {"walls": True, "ground_z": True, "ceiling_z": True}
 _SCHEMA_WALL = {"point": True, "normal": True}
@@ -560,7 +568,9 @@ def parse_sidecar(path: Path, text: str, data: Any) -> tuple[NominalVehicle, Sce
         if not isinstance(source, str):
             raise check.fail("vehicle.thrust_map.source", f"must be a string, got {_type_name(source)}")
         thrust_map = ThrustMap(kind, coefficient, source)
-    vehicle = NominalVehicle(mass, rotor_positions, drag, thrust_map)
+    motor_time_constant = (check.number("vehicle.motor_time_constant", vehicle_data["motor_time_constant"], 0.0,
+                                        MAX_TIME_CONSTANT) if "motor_time_constant" in vehicle_data else 0.0)
+    vehicle = NominalVehicle(mass, rotor_positions, drag, thrust_map, motor_time_constant)
     try:
         vehicle.to_vehicle_params()
     except ValueError as exc:

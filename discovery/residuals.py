@@ -14,7 +14,9 @@ averaged over each sample step and smoothed with the matched kernel, so that::
     r_k(M)  = y_k - K[F_M]_k                            residual against model M (N)
 
 where ``K`` is the matched kernel over steps, ``T`` the collective thrust of the step
-(the command, held over the step, or the sum of logged rotor thrusts) and ``F_M`` the
+(the command, held over the step, or the sum of logged rotor thrusts; when the vehicle has a
+``motor_time_constant``, what lagging rotors produce from it, averaged over the step,
+:func:`lagged_thrust`) and ``F_M`` the
 aerodynamic force of model ``M`` at the samples. With a measured acceleration the
 first term is ``m K[a]`` instead. Effects are evaluated at the position and velocity
 smoothed over a short window (:data:`STATE_WINDOW_S`) and the logged attitude and body
@@ -45,6 +47,7 @@ from discovery.differentiation import LocalPolynomial
 from discovery.flight_log import FlightLog, NominalVehicle
 from wall_env.aero import AeroModel
 from wall_env.model_file import nominal_aero_model
+from wall_env.motor_lag import held_command_response
 from wall_env.scene import Scene
 
 __all__ = ["Segment", "FlightData", "prepare", "step_average_samples", "DEFAULT_WINDOW_S", "DEFAULT_BLOCK_S",
@@ -78,6 +81,7 @@ class Segment:
     measured_force: np.ndarray  # (n, 3) N, y_k: the aerodynamic force the data show
     fold: np.ndarray  # (n,) int, the cross-validation fold each sample is held out in
     train_mask: np.ndarray  # (K, n) bool, samples usable for fitting when fold k is held out
+    thrust_logged: np.ndarray | None = field(repr=False, default=None)  # (n,) N, the log's own thrust (a command)
     p_measured: np.ndarray | None = field(repr=False, default=None)  # (n, 3) logged (unsmoothed) position
     p_start: np.ndarray | None = field(repr=False, default=None)  # (n, 3) position for prediction starts (short smoothing)
     v_start: np.ndarray | None = field(repr=False, default=None)  # (n, 3) velocity for prediction starts (short smoothing)
@@ -154,6 +158,15 @@ class FlightData:
         return self.concat([s.t for s in self.segments])
 
 
+def lagged_thrust(rotor_logged: np.ndarray, t: np.ndarray, time_constant: float) -> tuple[np.ndarray, np.ndarray]:
+    """What lagging rotors produce for a logged rotor thrust ``(n, 4)`` held over each step
+    (:func:`wall_env.motor_lag.held_command_response`): the rotor thrusts at the samples and the collective
+    thrust of the step starting at each sample (its mean over the step; the last sample keeps its own)."""
+    response = held_command_response(rotor_logged, float(np.mean(np.diff(t))), time_constant)
+    collective = np.append(response.step_mean.sum(axis=1), response.at_samples[-1].sum())
+    return response.at_samples, collective
+
+
 def _fold_assignment(t: np.ndarray, t0: float, block_s: float, n_folds: int,
                      guard_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Fold of each sample (blocks of ``block_s`` dealt round robin) and the training masks.
@@ -213,6 +226,9 @@ def prepare(logs: list[FlightLog], *, window_s: float = DEFAULT_WINDOW_S, order:
             else:
                 thrust = log.thrust_cmd[part]
                 rotor = np.repeat(thrust[:, None] / 4.0, 4, axis=1)
+            logged = thrust
+            if vehicle.motor_time_constant > 0:  # the rotors produce the logged thrust late
+                rotor, thrust = lagged_thrust(rotor, t, vehicle.motor_time_constant)
             if log.a_world is not None:
                 accel_term = m * kernel.step_average(step_average_samples(log.a_world[part]))
             else:
@@ -228,7 +244,7 @@ def prepare(logs: list[FlightLog], *, window_s: float = DEFAULT_WINDOW_S, order:
             # prediction starts need the state at one instant: a short window keeps the lag of a 1 s fit out
             short = LocalPolynomial(t, min(START_WINDOW_S, window_s), order)
             segments.append(Segment(index, log.source, t, states, thrust, log.omega_cmd_body[part], kernel,
-                                    log.scene, log.gravity, measured, fold, train, log.p_world[part],
+                                    log.scene, log.gravity, measured, fold, train, logged, log.p_world[part],
                                     short.smooth(log.p_world[part]), short.smooth(v_raw)))
     if not segments:
         raise ValueError("no log has a segment long enough to differentiate")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -84,6 +85,7 @@ def test_round_trip_keeps_every_value_and_the_sidecar(tmp_path):
                  "rotor_thrusts"):
         np.testing.assert_allclose(getattr(back, name), getattr(log, name), rtol=1e-8, atol=1e-9)
     assert back.vehicle == log.vehicle
+    assert back.vehicle.motor_time_constant == 0.0  # absent: no lag
     assert back.scene == log.scene
     assert back.gravity == 9.81
     assert json.loads(json_path.read_text()) == {
@@ -213,7 +215,7 @@ def test_partial_optional_group_is_named(good_log):
 def test_unknown_json_key_is_named_with_its_line(good_log):
     _edit_json(good_log, lambda d: d["vehicle"].update({"inertia": [1, 2, 3]}))
     _expect(good_log, r"flight\.json: key 'vehicle\.inertia', line \d+: unknown key; allowed in vehicle: "
-                      r"\['drag', 'mass', 'rotor_positions', 'thrust_map'\]")
+                      r"\['drag', 'mass', 'motor_time_constant', 'rotor_positions', 'thrust_map'\]")
 
 
 @pytest.mark.parametrize("key, value, pattern", [
@@ -221,6 +223,7 @@ def test_unknown_json_key_is_named_with_its_line(good_log):
     ("mass", True, r"key 'vehicle\.mass', line \d+: must be a number, got a boolean True"),
     ("drag", [0.3, 0.3], r"key 'vehicle\.drag', line \d+: must be a list of 3 numbers"),
     ("rotor_positions", [[0, 0, 0]] * 3, r"key 'vehicle\.rotor_positions', line \d+: must be a list of 4"),
+    ("motor_time_constant", -0.01, r"key 'vehicle\.motor_time_constant', line \d+: must be a finite number in \[0, 1\]"),
 ])
 def test_json_key_of_the_wrong_type_is_named(good_log, key, value, pattern):
     _edit_json(good_log, lambda d: d["vehicle"].update({key: value}))
@@ -248,3 +251,13 @@ def test_rate_outside_the_supported_range_is_rejected(tmp_path):
     path = tmp_path / "slow.csv"
     write_log(synthetic_log(n=100, rate_hz=20.0), path)
     _expect(path, r"slow\.csv: column 't': median sample rate 20\.0 Hz is outside the supported 50 Hz to 1000 Hz")
+
+
+def test_a_motor_time_constant_round_trips_and_reaches_the_simulators_vehicle(tmp_path):
+    log = synthetic_log()
+    log.vehicle = replace(log.vehicle, motor_time_constant=0.035)
+    csv_path, json_path = write_log(log, tmp_path / "lag.csv")
+    assert json.loads(json_path.read_text())["vehicle"]["motor_time_constant"] == 0.035
+    back = read_log(csv_path)
+    assert back.vehicle.motor_time_constant == 0.035
+    assert back.vehicle.to_vehicle_params().motor_time_constant == 0.035

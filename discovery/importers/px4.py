@@ -34,6 +34,7 @@ motor order, in the FLU body frame. Time starts at 0 at the log's start.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -194,7 +195,7 @@ def read_ulog(path: str | Path, vehicle: NominalVehicle, scene: Scene, gravity: 
     else:
         rotor_thrusts = apply_thrust_map(thrust_map, u_motors)
         thrust = rotor_thrusts.sum(axis=1)
-    vehicle = NominalVehicle(vehicle.mass, vehicle.rotor_positions, vehicle.drag, thrust_map)
+    vehicle = replace(vehicle, thrust_map=thrust_map)
     log = FlightLog(t=t, p_world=p_world, v_world=v_world, q_body_to_world=q, omega_body=omega, thrust_cmd=thrust,
                     omega_cmd_body=omega_cmd, vehicle=vehicle, scene=scene, gravity=gravity,
                     rotor_thrusts=rotor_thrusts, source=str(path))

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -325,10 +326,9 @@ def read_bag(path: str | Path, vehicle: NominalVehicle, scene: Any, gravity: flo
                                      "give vehicle.thrust_map in the vehicle file")
             thrust_map, note = fit.thrust_map, fit.note
         u = apply_thrust_map(thrust_map, u)
-        vehicle = NominalVehicle(vehicle.mass, vehicle.rotor_positions, vehicle.drag, thrust_map)
+        vehicle = replace(vehicle, thrust_map=thrust_map)
     elif vehicle.thrust_map is None:
-        vehicle = NominalVehicle(vehicle.mass, vehicle.rotor_positions, vehicle.drag,
-                                 ThrustMap("collective", 1.0, "thrust logged in newtons"))
+        vehicle = replace(vehicle, thrust_map=ThrustMap("collective", 1.0, "thrust logged in newtons"))
     log = FlightLog(t=t, p_world=p, v_world=v, q_body_to_world=q, omega_body=omega, thrust_cmd=np.clip(u, 0.0, None),
                     omega_cmd_body=omega_cmd, vehicle=vehicle, scene=scene, gravity=gravity, source=str(path))
     info = {"format": "ROS 2 bag", "file": str(path), "rate_hz": round(rate_hz, 3), "samples": int(len(t)),
