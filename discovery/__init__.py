@@ -20,7 +20,8 @@ Command line: ``wall-inspector fly`` records logs from the simulator and
 :mod:`discovery.flight_log`; the modules, in the order of the workflow:
 :mod:`~discovery.flight_log`, :mod:`~discovery.differentiation`,
 :mod:`~discovery.aero_eval`, :mod:`~discovery.residuals`, :mod:`~discovery.prediction`,
-:mod:`~discovery.regressors`, :mod:`~discovery.fitting`, :mod:`~discovery.selection`,
+:mod:`~discovery.regressors`, :mod:`~discovery.fitting`, :mod:`~discovery.selection`
+(with :mod:`~discovery.motor_lag`, a lag of the rotors behind the logged thrust),
 :mod:`~discovery.workflow`, :mod:`~discovery.report`, :mod:`~discovery.plots`,
 :mod:`~discovery.closed_loop`, :mod:`~discovery.fly`, :mod:`~discovery.scenarios`,
 :mod:`~discovery.cli`; beside them :mod:`~discovery.importers` (PX4 ULog and ROS 2 bags,

@@ -25,7 +25,8 @@ __all__ = ["Z_95", "NULL_VALUES", "MANOEUVRES", "Undetermined", "undetermined_ca
            "determining_manoeuvre", "separating_manoeuvre"]
 
 Z_95 = 1.96
-NULL_VALUES = {"k_s": 0.0, "d_thr": 0.0, "D": 0.0, "C": 0.0, "F": 0.0, "w": 0.0, "scale": 1.0, "radius": 0.0}
+NULL_VALUES = {"k_s": 0.0, "d_thr": 0.0, "D": 0.0, "C": 0.0, "F": 0.0, "w": 0.0, "scale": 1.0, "radius": 0.0,
+               "time_constant": 0.0}
 _AXES = "xyz"
 MANOEUVRES = {
     ("wall_suction", "k_s"): "fly with the rotors within 0.15 m of the wall, at several distances",
@@ -40,6 +41,8 @@ MANOEUVRES = {
                                   "times (the offset shows where the distance is comparable to it)",
     ("thrust_scale", "scale"): "climb and descend briskly (thrust varying by 20 % or more)",
     ("constant_force", "F"): "a longer flight (the force is within its noise)",
+    ("motor_lag", "time_constant"): "climb and descend in steps of different lengths (0.3 s to 3 s), so that the "
+                                    "thrust changes at several rates",
 }
 
 

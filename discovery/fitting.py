@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
+from discovery.motor_lag import LagTerm, MotorLag
 from discovery.residuals import FlightData, Segment
 from wall_env.aero import AeroModel
 from wall_env.effects import Effect, make_effect
@@ -171,18 +172,18 @@ class EffectFit:
     """
 
     def __init__(self, data: FlightData, effects: list[Effect], nominal_residual: list[np.ndarray],
-                 terms: dict[Any, _Term] | None = None):
+                 terms: dict[Any, _Term | LagTerm] | None = None):
         self.data = data
         self.templates = list(effects)
         self.rows = [seg.fit_rows for seg in data.segments]
         self.r_nom = [r[rows] for r, rows in zip(nominal_residual, self.rows)]
         self.folds = [seg.fold[rows] for seg, rows in zip(data.segments, self.rows)]
         cache = terms if terms is not None else {}
-        self.terms = []
+        self.terms: list[_Term | LagTerm] = []
         for effect in effects:
             key: Any = (effect.name, tuple(sorted(effect.option_values.items())))  # forms of one effect differ
             if key not in cache:
-                cache[key] = _Term(data, effect)
+                cache[key] = LagTerm(data, effect) if isinstance(effect, MotorLag) else _Term(data, effect)
             self.terms.append(cache[key])
         self.sizes = [t.size for t in self.terms]
         self.low = np.concatenate([t.low for t in self.terms]) if self.terms else np.zeros(0)

@@ -9,6 +9,12 @@ Keys:
     (:func:`discovery.regressors.describe_force`) and the share of the nominal model's
     held-out force-residual energy it explains. Empty when the data agree with the
     nominal model within noise.
+``motor_lag``
+    ``null`` when no lag was looked for (the vehicle block gives ``motor_time_constant``,
+    or one effect was fitted alone), else the lag fitted next to the chosen effects
+    (:mod:`discovery.motor_lag`): ``{"time_constant_s", "std_s", "explained", "kept",
+    "reason"}``. A kept lag is the model file's vehicle ``motor_time_constant``, and the
+    effects above were chosen with it.
 ``gap_before``, ``gap_after``
     ``{"force_rms_N", "prediction_rms_m"}`` on held-out data for the nominal and the
     discovered model: RMS of the force residual (vector norm, N) and of the open-loop
@@ -82,7 +88,7 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         })
     selection = found.selection_
     if selection is None:  # nothing to fit
-        report = {"effects": [], "gap_before": found.gap_before_, "gap_after": found.gap_after_,
+        report = {"effects": [], "motor_lag": None, "gap_before": found.gap_before_, "gap_after": found.gap_after_,
                   "model": None if model_path is None else str(model_path), "unexplained": None,
                   "closed_loop": closed_loop, "notes": list(found.notes_), "limits": list(found.limits_),
                   "details": {"logs": _logs(found), "runtime_s": round(found.runtime_s_, 3)}}
@@ -102,6 +108,7 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
     }
     report = {
         "effects": effects,
+        "motor_lag": found.motor_lag_,
         "gap_before": found.gap_before_,
         "gap_after": found.gap_after_,
         "model": None if model_path is None else str(model_path),
@@ -155,7 +162,12 @@ def format_summary(report: dict[str, Any]) -> str:
                 place = f"{place} in [{where['range'][0]:.3g}, {where['range'][1]:.3g}] {where.get('unit') or ''}"
             lines.append(f"found {e['name']}: {params}; acts {place or 'nowhere'}; explains "
                          f"{100 * e['explained_fraction']:.0f} % of the held-out residual")
-    else:
+    lag = report.get("motor_lag")
+    if lag and lag["kept"]:
+        lines.append(f"found a motor lag: time_constant={_fmt(lag['time_constant_s'])} +- {_fmt(lag['std_s'])} s (the "
+                     f"rotors produce the logged thrust late); explains {100 * lag['explained']:.0f} % of the held-out "
+                     "residual; written as the model's vehicle motor_time_constant")
+    if not report["effects"] and not (lag and lag["kept"]):
         if "selection" not in report["details"]:
             lines.append("found nothing: the logs hold no airborne flight to fit (see the notes below)")
         elif report.get("unexplained"):

@@ -37,18 +37,20 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from discovery.coverage import REST_THRUST_SHARE, flight_limits, resting_on_ground, scene_problems
-from discovery.determination import determined, restrict
+from discovery.determination import determined, determining_manoeuvre, restrict
 from discovery.fitting import out_of_fold_residuals
 from discovery.flight_log import FlightLog
+from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
-from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, prepare
+from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
 from discovery.selection import Selection, fit_only, forward_selection
 from wall_env.aero import AeroModel
 from wall_env.effects import EFFECTS, Effect, make_effect
@@ -93,14 +95,20 @@ class Discovery:
     unexplained_threshold: share of the final held-out residual that regressor bin means
         must predict for it to be reported as ``unexplained``.
     options: effect options for candidates, e.g. ``{"wall_suction": {"thrust_scaling": True}}``.
+    motor_lag: look for a motor lag next to the chosen effects when the vehicle block gives no
+        ``motor_time_constant`` (:mod:`discovery.motor_lag`); one found becomes the model's
+        vehicle ``motor_time_constant`` and the effects are chosen again with it.
     progress: a callable receiving short status strings (e.g. ``print``), or None.
     """
+
+    residual_before_: np.ndarray  # (n, 3) N, the nominal model's held-out force residual
+    where_before_: dict  # where that residual is (discovery.regressors.localise_residual)
 
     def __init__(self, candidates: list[str] | None = None, effect: str | None = None, *,
                  window_s: float = DEFAULT_WINDOW_S, block_s: float = DEFAULT_BLOCK_S, n_folds: int = 5,
                  horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S, max_effects: int = 3,
                  unexplained_threshold: float = 0.15, options: dict[str, dict[str, Any]] | None = None,
-                 progress=None):
+                 motor_lag: bool = True, progress=None):
         check_positive("window_s", window_s, "s", low=0.02, high=10.0)
         check_positive("horizon_s", horizon_s, "s", low=0.02, high=10.0)
         check_positive("block_s", block_s, "s", low=0.1, high=1e4)
@@ -123,6 +131,9 @@ class Discovery:
         self.max_effects = int(max_effects)
         self.unexplained_threshold = float(unexplained_threshold)
         self.options = dict(options or {})
+        if not isinstance(motor_lag, bool):
+            raise ValueError(f"motor_lag must be True or False, got {motor_lag!r}")
+        self.motor_lag = motor_lag
         self.progress = progress
 
     # ------------------------------------------------------------------ fitting
@@ -182,27 +193,32 @@ class Discovery:
             return self._nothing_to_fit(f"no airborne stretch of at least {shortest:.3g} s: nothing to fit",
                                         started)
         self.usable_ = True
+        look_for_lag = self.motor_lag and self.effect is None and data.vehicle.motor_time_constant == 0
+        r_nom, selection = self._choose(data, look_for_lag)
+        # the user's nominal model, against which every "before" figure is given
+        data_before, nominal_before = data, FlightModel(data.vehicle.to_vehicle_params(), [])
+        residual_before, where_before = self.residual_before_, self.where_before_
+        lag = selection.motor_lag
+        if lag is not None and lag["kept"]:
+            # not aerodynamic: the vehicle's own motor time constant; the effects are chosen again on the thrust
+            # the lagging rotors produced
+            tau = lag["time_constant_s"]
+            self._say(f"the thrust lags the log by {1e3 * tau:.3g} ms: choosing the effects again with that lag")
+            airborne = [replace(log, vehicle=replace(log.vehicle, motor_time_constant=tau)) for log in airborne]
+            data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
+            r_nom, selection = self._choose(data, False)
+            selection.motor_lag = lag
+            self.residual_before_, self.where_before_ = residual_before, where_before
+        self.motor_lag_ = lag
         self.data_ = data
         vehicle = data.vehicle.to_vehicle_params()
-        nominal = FlightModel(vehicle, [])
-        r_nom = data.residuals(nominal.aero_model())
-        self.regressors_ = regressors(data)
-        self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]))
         self.notes_ += scene_problems(self.regressors_, data.times)
-
-        # 1-2: residual and where it is
-        self.residual_before_ = data.concat(r_nom)
-        self.where_before_ = localise_residual(data, self.residual_before_, self.regressors_)
-
-        # 3: what
-        if self.effect is not None:
-            self._say(f"fitting {self.effect} only")
-            selection = fit_only(data, r_nom, self._template(self.effect))
-        else:
-            templates = [self._template(n) for n in self.candidates]
-            selection = forward_selection(data, r_nom, templates, self.max_effects, progress=self._say)
         self.selection_: Selection | None = selection
         self.limits_ += selection.form_limits
+        if lag is not None and not lag["kept"] and lag["reason"].startswith(UNDETERMINED_LAG):
+            self.limits_.append({"effects": [LAG_KEY], "reason": f"a motor lag would pay for itself but {lag['reason']}"
+                                 " (a lag and a vertical drag look alike on a climb and descent at one pace)",
+                                 "manoeuvre": determining_manoeuvre(LAG_KEY, "time_constant")})
         chosen = selection.chosen
         # only what the flight determined goes into the model (discovery.determination)
         self.effects_, self.param_std_, self.undetermined_ = determined(list(chosen.fit.effects),
@@ -218,7 +234,8 @@ class Discovery:
         # 5: the proof, on held-out data
         self._say("open-loop predictions")
         self.residual_after_ = data.concat(out_of_fold_residuals(data, self.effects_, fold_theta, r_nom))
-        self.prediction_before_ = prediction_pairs(data, nominal.aero_model(), None, self.horizon_s, self.stride_s)
+        self.prediction_before_ = prediction_pairs(data_before, nominal_before.aero_model(), None, self.horizon_s,
+                                                   self.stride_s)
         fold_models = self._fold_theta(fold_theta)
         self.prediction_after_ = prediction_pairs(data, self.model_.aero_model(), fold_models, self.horizon_s,
                                                   self.stride_s)
@@ -246,6 +263,25 @@ class Discovery:
         self.runtime_s_ = time.perf_counter() - started
         return self
 
+    def _choose(self, data: FlightData, look_for_lag: bool) -> tuple[list[np.ndarray], Selection]:
+        """Steps 1-3 on prepared data: the nominal residual, where it is, and what explains it."""
+        nominal = FlightModel(data.vehicle.to_vehicle_params(), [])
+        r_nom = data.residuals(nominal.aero_model())
+        self.regressors_ = regressors(data)
+        self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]))
+
+        # 1-2: residual and where it is
+        self.residual_before_ = data.concat(r_nom)
+        self.where_before_ = localise_residual(data, self.residual_before_, self.regressors_)
+
+        # 3: what
+        if self.effect is not None:
+            self._say(f"fitting {self.effect} only")
+            return r_nom, fit_only(data, r_nom, self._template(self.effect))
+        templates = [self._template(n) for n in self.candidates]
+        return r_nom, forward_selection(data, r_nom, templates, self.max_effects, progress=self._say,
+                                        look_for_lag=look_for_lag)
+
     def _shape(self, where: dict) -> dict | None:
         """The unexplained residual along its mean direction, piecewise linear in its localising quantity."""
         reg = next((r for r in self.regressors_ if r.name == where.get("regressor")), None)
@@ -268,6 +304,7 @@ class Discovery:
         self.effects_, self.param_std_, self.explained_fraction_, self.undetermined_ = [], [], {}, []
         self.model_ = FlightModel(vehicle, [])
         self.selection_ = None
+        self.motor_lag_ = None
         self.limits_ = [{"effects": sorted(EFFECTS), "reason": reason,
                          "manoeuvre": "fly: take off and hover, move along each body axis at 1 m/s or more, and "
                                       "pass close to the walls, ground and ceiling of the scene"}]

@@ -3,9 +3,10 @@
 Nothing here comes from ``wall_env``: plain numpy, RK4 at 500 Hz, a cascaded PID unlike the
 project's (acceleration feedback to a thrust vector, attitude to rate commands, body rates
 following their commands with a 30 ms lag), a 1.3 kg vehicle, a white force disturbance and
-measurement noise. The hidden effects are written from the literature forms: wall suction
-per rotor (Yang et al., Eq. 6, 10), quadratic drag on the air-relative velocity in a steady
-wind, a steady force. The log is written as the flight-log format's CSV and sidecar,
+measurement noise, and optionally rotors whose thrust follows the command with a first-order
+lag (integrated as a state). The hidden effects are written from the literature forms: wall
+suction per rotor (Yang et al., Eq. 6, 10), quadratic drag on the air-relative velocity in a
+steady wind, linear body drag, a steady force. The log is written as the flight-log format's CSV and sidecar,
 directly, without the project's writer.
 """
 
@@ -41,7 +42,7 @@ def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray) -> np.ndarray:
     """World force (N) of ``effects``: ``suction`` (k_s, d_thr) of a wall at x = 0 with normal +x,
-    ``wind_force`` (3,) and ``quadratic_drag`` (C (3,), wind (3,))."""
+    ``wind_force`` (3,), ``quadratic_drag`` (C (3,), wind (3,)) and ``linear_drag`` (D (3,), body axes)."""
     force = np.zeros(3)
     if "suction" in effects:
         k_s, d_thr = effects["suction"]
@@ -54,21 +55,29 @@ def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray) -> 
         C, wind = (np.asarray(x, dtype=float) for x in effects["quadratic_drag"])
         v_air_body = R.T @ (v - wind)
         force += R @ (-C * np.abs(v_air_body) * v_air_body)
+    if "linear_drag" in effects:
+        force += R @ (-np.asarray(effects["linear_drag"], dtype=float) * (R.T @ v))
     return force
 
 
-def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, disturbance: np.ndarray) -> tuple:
-    """d/dt of (p, v, q, w) with the thrust and rate command held and a disturbance force (N)."""
-    p, v, q, w = state
+def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, disturbance: np.ndarray,
+                motor_lag: float) -> tuple:
+    """d/dt of (p, v, q, w, produced thrust) with the thrust and rate command held and a disturbance force (N)."""
+    p, v, q, w, produced = state
     R = _R(q / np.linalg.norm(q))
-    force = thrust * R[:, 2] + hidden_force(effects, p, v, R) + disturbance
-    return v, force / MASS - np.array([0, 0, GRAVITY]), 0.5 * _qmul(q, np.array([0.0, *w])), (w_cmd - w) / _RATE_LAG
+    if motor_lag > 0:
+        thrust_dot = (thrust - produced) / motor_lag
+    else:
+        produced, thrust_dot = thrust, 0.0
+    force = produced * R[:, 2] + hidden_force(effects, p, v, R) + disturbance
+    return (v, force / MASS - np.array([0, 0, GRAVITY]), 0.5 * _qmul(q, np.array([0.0, *w])), (w_cmd - w) / _RATE_LAG,
+            thrust_dot)
 
 
 def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: float, seed: int,
-        force_noise: float = 0.25) -> list[tuple]:
+        force_noise: float = 0.25, motor_lag: float = 0.0) -> list[tuple]:
     """Track ``centre + amplitude sin(2 pi t / period + phase)``; rows ``(t, p, v, q, w, T_cmd, w_cmd)``
-    at ``rate_hz``, each with the command applied from then on."""
+    at ``rate_hz``, each with the command applied from then on; the rotors lag it by ``motor_lag`` s."""
     rng = np.random.default_rng(seed)
     centre, amplitude, period = (np.asarray(x, dtype=float) for x in (centre, amplitude, period))
     phase = np.array([0.0, 1.0, 2.0])
@@ -84,6 +93,7 @@ def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: floa
     kp, kd, ki = np.array([6.0, 6.0, 12.0]), np.array([4.0, 4.0, 6.0]), np.array([1.0, 1.0, 4.0])
     every = int(round(1.0 / (rate_hz * _DT)))
     thrust, w_cmd = MASS * GRAVITY, np.zeros(3)
+    produced = thrust
     rows = []
     for i in range(int(round(duration / _DT))):
         t = i * _DT
@@ -96,13 +106,13 @@ def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: floa
             w_cmd = 8.0 * (R.T @ np.cross(R[:, 2], f_des / np.linalg.norm(f_des)))
             w_cmd[2] = -2.0 * math.atan2(R[1, 0], R[0, 0])  # yaw held at 0
             rows.append((t, p.copy(), v.copy(), q.copy(), w.copy(), thrust, w_cmd.copy()))
-        inputs = (effects, thrust, w_cmd, rng.normal(0.0, force_noise, 3))
-        state = (p, v, q, w)
+        inputs = (effects, thrust, w_cmd, rng.normal(0.0, force_noise, 3), motor_lag)
+        state = (p, v, q, w, produced)
         k1 = _derivative(state, *inputs)
         k2 = _derivative(tuple(x + _DT / 2 * k for x, k in zip(state, k1)), *inputs)
         k3 = _derivative(tuple(x + _DT / 2 * k for x, k in zip(state, k2)), *inputs)
         k4 = _derivative(tuple(x + _DT * k for x, k in zip(state, k3)), *inputs)
-        p, v, q, w = (x + _DT / 6 * (a + 2 * b + 2 * c + d) for x, a, b, c, d in zip(state, k1, k2, k3, k4))
+        p, v, q, w, produced = (x + _DT / 6 * (a + 2 * b + 2 * c + d) for x, a, b, c, d in zip(state, k1, k2, k3, k4))
         q = q / np.linalg.norm(q)
     return rows
 
