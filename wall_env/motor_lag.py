@@ -63,8 +63,9 @@ def held_command_response(commanded: np.ndarray, dt: float, time_constant: float
         return LagResponse(commanded.copy(), held.copy(), -change / dt)
     a = float(np.exp(-dt / time_constant))
     b = time_constant / dt * (1.0 - a)
-    da = a * dt / time_constant**2
-    db = (1.0 - a) / dt - a / time_constant
+    # a time constant under dt / 745 makes a zero, and with it da and a / tau (tau^2 may underflow too)
+    da = a * dt / time_constant**2 if a > 0 else 0.0
+    db = (1.0 - a) / dt - (a / time_constant if a > 0 else 0.0)
     # f_{k+1} = a f_k + (1 - a) f_cmd,k, from f_0 = f_cmd,0
     produced = _first_order(a, commanded[0], (1.0 - a) * held)
     error = produced[:-1] - held  # f_k - f_cmd,k
