@@ -10,10 +10,11 @@ velocity: it looks like a *negative* vertical drag, and a vertical drag fitted w
 it comes out low (by 40-55 % with a 30 ms lag on the second simulator's 3 s climb and
 descent).
 
-So, once the effects are chosen, :func:`lag_candidate` fits a lag jointly with them (the
-:class:`MotorLag` term, one parameter ``time_constant`` in seconds). It is kept when it
-pays like any effect (held-out score, a material share of the force gap and of the
-weight) and its 95 % interval is away from zero and from :data:`MAX_FITTED_S`. A lag so
+So, once the effects are chosen, :func:`discovery.selection.forward_selection` (with
+``look_for_lag``) fits a lag jointly with them (the :class:`MotorLag` term, one parameter
+``time_constant`` in seconds). It is kept when it lowers the held-out score, the force it
+accounts for is at least the weight share an effect must explain, and its 95 % interval is
+away from zero and from :data:`MAX_FITTED_S`. A lag so
 found is not an aerodynamic effect: it becomes the vehicle's ``motor_time_constant``,
 the logs are prepared again with the lagged thrust and the effects are chosen again on
 them (:class:`discovery.workflow.Discovery`). A vehicle block that gives
@@ -68,7 +69,6 @@ class LagTerm:
         if data.vehicle.motor_time_constant > 0:
             raise ValueError("the vehicle already has a motor_time_constant; a lag on top of it is not fitted")
         self.data = data
-        self.effect = effect
         self.size = effect.param_size
         self.low, self.high = effect.param_bounds()
         self._rows = [seg.fit_rows for seg in data.segments]
@@ -92,6 +92,7 @@ class LagTerm:
 def lag_force_steps(thrust_logged: Any, t: np.ndarray, z_steps: np.ndarray,
                     tau: float) -> tuple[np.ndarray, np.ndarray]:
     """Per step: ``(f(tau) - f_cmd) z_body`` ``(n - 1, 3)`` N and its derivative in ``tau`` ``(n - 1, 3, 1)``."""
-    response = held_command_response(np.asarray(thrust_logged, dtype=float), float(np.mean(np.diff(t))), tau)
-    deficit = response.step_mean - np.asarray(thrust_logged, dtype=float)[:-1]
+    thrust_logged = np.asarray(thrust_logged, dtype=float)
+    response = held_command_response(thrust_logged, float(np.mean(np.diff(t))), tau)
+    deficit = response.step_mean - thrust_logged[:-1]
     return deficit[:, None] * z_steps, (response.d_step_mean_d_tau[:, None] * z_steps)[:, :, None]

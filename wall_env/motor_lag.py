@@ -91,6 +91,6 @@ def _first_order(a: float, start: np.ndarray, inputs: np.ndarray) -> np.ndarray:
     if n:
         size = 1 << int(np.ceil(np.log2(2 * n)))
         kernel = np.fft.rfft(powers[:n], size)
-        spectrum = np.fft.rfft(inputs, size, axis=0) * kernel.reshape((-1,) + (1,) * (inputs.ndim - 1))
+        spectrum = np.fft.rfft(inputs, size, axis=0) * kernel.reshape(shape)
         out[1:] += np.fft.irfft(spectrum, size, axis=0)[:n]
     return out
