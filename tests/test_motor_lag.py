@@ -35,6 +35,33 @@ def test_the_derivative_in_the_time_constant_matches_finite_differences():
         assert derivative == pytest.approx(slope, rel=1e-4, abs=1e-4 * np.abs(slope).max())
 
 
+def test_a_start_away_from_the_command_decays_with_the_time_constant():
+    tau, dt = 0.03, 0.01
+    command = np.full(4, 13.0)
+    response = held_command_response(command, dt, tau, start=9.0)
+    # f(t) = 13 - 4 exp(-t / tau) from t = 0; its mean over the first step 13 - 4 tau / dt (1 - exp(-dt / tau))
+    assert response.at_samples == pytest.approx(13 - 4 * np.exp(-np.arange(4) / 3), rel=1e-12)
+    assert response.step_mean[0] == pytest.approx(13 - 4 * 3 * (1 - np.exp(-1 / 3)), rel=1e-12)
+    # the step means are linear in the start, with slope b a^k
+    b = tau / dt * (1 - np.exp(-dt / tau))
+    assert response.d_step_mean_d_start == pytest.approx(b * np.exp(-np.arange(3) / 3), rel=1e-12)
+    with pytest.raises(ValueError, match="start must be a finite thrust"):
+        held_command_response(command, dt, tau, start=np.nan)
+
+
+def test_the_derivatives_with_a_start_match_finite_differences():
+    rng = np.random.default_rng(5)
+    command = 10.0 + np.cumsum(rng.normal(0.0, 0.3, (200, 4)), axis=0)
+    start = command[0] + np.array([2.0, -1.0, 0.5, 3.0])
+    for tau in (0.0, 1e-9, 0.004, 0.03):
+        step = 1e-7
+        base = held_command_response(command, 0.005, tau, start)
+        slope = (held_command_response(command, 0.005, tau + step, start).step_mean - base.step_mean) / step
+        assert base.d_step_mean_d_tau == pytest.approx(slope, rel=1e-4, abs=1e-4 * np.abs(slope).max())
+        moved = held_command_response(command, 0.005, tau, start + 1.0).step_mean - base.step_mean
+        assert moved == pytest.approx(np.repeat(base.d_step_mean_d_start[:, None], 4, axis=1), abs=1e-9)
+
+
 def test_no_lag_gives_back_the_command_and_bad_arguments_are_named():
     command = np.array([1.0, 2.0, 4.0])
     response = held_command_response(command, 0.01, 0.0)
