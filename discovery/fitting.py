@@ -43,7 +43,7 @@ from discovery.residuals import FlightData, Segment
 from wall_env.aero import AeroModel
 from wall_env.effects import Effect, make_effect
 
-__all__ = ["CV_TOL", "STARTS", "EffectFit", "FitResult", "applicable", "hac_lags", "out_of_fold_residuals"]
+__all__ = ["CV_TOL", "STARTS", "EffectFit", "FitResult", "applicable", "term_key", "hac_lags", "out_of_fold_residuals"]
 
 # Starting points for effects whose force is not affine in their parameters (plausible
 # physical values; the fit is bounded by each parameter's range from the library).
@@ -58,6 +58,11 @@ STARTS: dict[str, list[dict[str, Any]]] = {
 #: the refit's cost to a millionth (scores move in the third decimal against a parameter price of ~10),
 #: not to 1e-10; this saves a sixth of discovery's force evaluations
 CV_TOL = 1e-6
+
+
+def term_key(effect: Effect) -> tuple:
+    """The key of ``effect``'s term in a cache shared by fits: its name and options (forms of one effect differ)."""
+    return (effect.name, tuple(sorted(effect.option_values.items())))
 
 
 def applicable(effect: Effect, data: FlightData) -> bool:
@@ -148,6 +153,10 @@ class _Term:
             self.affine = True
             self._affine_base = [(f, j, a) for f, j in zip(fa, ja)]
 
+    def unseen(self, theta: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
+        """Nuisance parameters the rows ``masks`` do not see: an effect has none."""
+        return np.zeros(self.size, dtype=bool)
+
     def evaluate(self, theta: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, p)`` per segment at the fit rows."""
         theta = np.asarray(theta, dtype=float)
@@ -181,11 +190,12 @@ class EffectFit:
         cache = terms if terms is not None else {}
         self.terms: list[_Term | LagTerm] = []
         for effect in effects:
-            key: Any = (effect.name, tuple(sorted(effect.option_values.items())))  # forms of one effect differ
+            key = term_key(effect)
             if key not in cache:
                 cache[key] = LagTerm(data, effect) if isinstance(effect, MotorLag) else _Term(data, effect)
             self.terms.append(cache[key])
         self.sizes = [t.size for t in self.terms]
+        self._defaults = np.concatenate([e.param_vector() for e in effects]) if effects else np.zeros(0)
         self.low = np.concatenate([t.low for t in self.terms]) if self.terms else np.zeros(0)
         self.high = np.concatenate([t.high for t in self.terms]) if self.terms else np.zeros(0)
 
@@ -223,21 +233,33 @@ class EffectFit:
         return np.concatenate(rows_r), np.concatenate(rows_j, axis=0)
 
     # ------------------------------------------------------------------ fitting
-    def _solve(self, theta0: np.ndarray, masks: list[np.ndarray], tol: float = 1e-10) -> Any:
-        cache: dict[str, Any] = {}
+    def _solve(self, theta0: np.ndarray, masks: list[np.ndarray], tol: float = 1e-10,
+               free: np.ndarray | None = None) -> Any:
+        """:func:`~scipy.optimize.least_squares` from ``theta0``; only the ``free`` entries move (all if None).
 
-        def both(theta):
-            key = theta.tobytes()
+        The result's ``x`` is the full parameter vector."""
+        free = np.ones(theta0.size, dtype=bool) if free is None else free
+        cache: dict[str, Any] = {}
+        x0 = np.clip(theta0, self.low, self.high)
+
+        def both(x_free):
+            key = x_free.tobytes()
             if cache.get("key") != key:
-                cache["key"] = key
-                cache["value"] = self._stacked(theta, masks)
+                theta = x0.copy()
+                theta[free] = x_free
+                r, j = self._stacked(theta, masks)
+                cache["key"], cache["value"] = key, (r, j[:, free])
             return cache["value"]
 
-        x0 = np.clip(theta0, self.low, self.high)
+        low, high = self.low[free], self.high[free]
         # least_squares needs strictly feasible starts inside the bounds
-        inside = np.clip(x0, self.low + 1e-9 * (1 + np.abs(self.low)), self.high - 1e-9 * (1 + np.abs(self.high)))
-        return least_squares(lambda th: both(th)[0], inside, jac=lambda th: both(th)[1], bounds=(self.low, self.high),
-                             method="trf", x_scale="jac", xtol=tol, ftol=tol, gtol=tol, max_nfev=200)
+        inside = np.clip(x0[free], low + 1e-9 * (1 + np.abs(low)), high - 1e-9 * (1 + np.abs(high)))
+        result = least_squares(lambda x: both(x)[0], inside, jac=lambda x: both(x)[1], bounds=(low, high),
+                               method="trf", x_scale="jac", xtol=tol, ftol=tol, gtol=tol, max_nfev=200)
+        theta = x0.copy()
+        theta[free] = result.x
+        result.x = theta
+        return result
 
     def starts(self, previous: dict[str, np.ndarray] | None = None) -> list[np.ndarray]:
         """Starting points: previous values where known, else the effect's default or :data:`STARTS`."""
@@ -312,7 +334,12 @@ class EffectFit:
         for k in range(self.data.n_folds):
             masks = [seg.train_mask[k][rows] for seg, rows in zip(self.data.segments, self.rows)]
             if self.terms and any(m.any() for m in masks):
-                theta_k = self._solve(full.theta, masks, CV_TOL).x
+                # a nuisance parameter the training rows do not see (a lag's start error, its segment's start
+                # held out) is not fitted to them: it takes its default, so held-out rows never see a value
+                # fitted to themselves
+                unseen = np.concatenate([t.unseen(th, masks) for t, th in zip(self.terms, self._split(full.theta))])
+                start = np.where(unseen, self._defaults, full.theta)
+                theta_k = self._solve(start, masks, CV_TOL, free=~unseen).x
             else:
                 theta_k = full.theta.copy()
             fold_theta.append(theta_k)

@@ -11,14 +11,19 @@ it comes out low (by 40-55 % with a 30 ms lag on the second simulator's 3 s clim
 descent).
 
 So, once the effects are chosen, :func:`discovery.selection.forward_selection` (with
-``look_for_lag``) fits a lag jointly with them (the :class:`MotorLag` term, one parameter
-``time_constant`` in seconds). It is kept when it lowers the held-out score, the force it
-accounts for is at least the weight share an effect must explain, and its 95 % interval is
-away from zero and from :data:`MAX_FITTED_S`. A lag so
-found is not an aerodynamic effect: it becomes the vehicle's ``motor_time_constant``,
-the logs are prepared again with the lagged thrust and the effects are chosen again on
-them (:class:`discovery.workflow.Discovery`). A vehicle block that gives
-``motor_time_constant`` is taken at its word and no lag is looked for.
+``look_for_lag``) fits a lag jointly with them: the :class:`MotorLag` term, with its
+``time_constant`` in seconds and, as nuisance parameters, each segment's ``start_error``,
+how far the rotors were from the logged thrust at the segment's first sample. A log begun in
+mid-air, or a stretch after a gap, need not start settled; taking it so biased a 30 ms lag
+10-25 % low on the second simulator's logs, which start with the rotors at hover under a
+command far from it. A cross-validation fold that holds a segment's start out takes that
+start settled (:meth:`LagTerm.unseen`). The lag is kept when it lowers the held-out score,
+the force it accounts for is at least the weight share an effect must explain, and its 95 %
+interval is away from zero and from :data:`MAX_FITTED_S`. A lag so found is not an
+aerodynamic effect: it becomes the vehicle's ``motor_time_constant``, the logs are prepared
+again with the lagged thrust and the effects are chosen again on them
+(:class:`discovery.workflow.Discovery`). A vehicle block that gives ``motor_time_constant``
+is taken at its word and no lag is looked for.
 """
 
 from __future__ import annotations
@@ -32,11 +37,14 @@ from discovery.residuals import FlightData, step_average_samples
 from wall_env.effects import Effect, FlightContext, Parameter, Wrench
 from wall_env.motor_lag import held_command_response
 
-__all__ = ["MotorLag", "LagTerm", "MAX_FITTED_S", "LAG_KEY", "UNDETERMINED_LAG", "lag_force_steps"]
+__all__ = ["MotorLag", "LagTerm", "MAX_FITTED_S", "MAX_START_ERROR_N", "LAG_KEY", "UNDETERMINED_LAG",
+           "lag_force_steps"]
 
 LAG_KEY = "motor_lag"
 UNDETERMINED_LAG = "the flight does not determine it"
 MAX_FITTED_S = 0.25  # s, the longest lag discovery fits (hobby motors: 10-100 ms)
+SEEN_SHARE = 1e-3  # rows carrying less of a start error's effect (rms) than this leave it unseen
+MAX_START_ERROR_N = 1e4  # N, bound of a segment's start error (a range, not a prior: far above any rotor's thrust)
 
 
 class MotorLag(Effect):
@@ -50,17 +58,30 @@ class MotorLag(Effect):
     description = "the rotors produce the logged thrust late (first-order lag)"
     reference = "first-order motor model (wall_env.motor_lag)"
     parameters = (Parameter("time_constant", "s", 0.02, 0.0, MAX_FITTED_S, "first-order motor time constant"),)
+    options = {"segments": 0}  # segments whose start error is fitted (0: every segment starts settled)
+
+    def base_parameters(self) -> tuple[Parameter, ...]:
+        segments = self.option_values["segments"]
+        if segments < 0:
+            raise ValueError(f"{self.name}.segments must be >= 0, got {segments}")
+        if not segments:
+            return type(self).parameters
+        return type(self).parameters + (Parameter(
+            "start_error", "N", (0.0,) * segments, -MAX_START_ERROR_N, MAX_START_ERROR_N,
+            "collective thrust produced minus logged at each segment's first sample"),)
 
     def wrench(self, ctx: FlightContext, theta: dict[str, ca.SX]) -> Wrench:
         raise TypeError("a motor lag is the vehicle's motor_time_constant (rotor state), not an aerodynamic wrench")
 
 
 class LagTerm:
-    """The lag's force ``K[(f(tau) - f_cmd) z_body]`` and its derivative at every segment's fit rows.
+    """The lag's force ``K[(f(tau, e_s) - f_cmd) z_body]`` and its derivatives at every segment's fit rows.
 
     Same interface as :class:`discovery.fitting.EffectFit`'s effect terms. The logged
     thrust is each segment's :attr:`~discovery.residuals.Segment.thrust_logged`, which
-    must be what the nominal model took as produced (a vehicle without a lag).
+    must be what the nominal model took as produced (a vehicle without a lag). With the
+    effect's ``segments`` option equal to the number of segments, segment ``s`` starts at
+    ``f_cmd + e_s`` (its ``start_error``); with 0, every segment starts settled.
     """
 
     affine = False
@@ -68,31 +89,58 @@ class LagTerm:
     def __init__(self, data: FlightData, effect: MotorLag):
         if data.vehicle.motor_time_constant > 0:
             raise ValueError("the vehicle already has a motor_time_constant; a lag on top of it is not fitted")
+        segments = effect.option_values["segments"]
+        if segments not in (0, len(data.segments)):
+            raise ValueError(f"{effect.name}.segments must be 0 or the number of segments, {len(data.segments)}; "
+                             f"got {segments}")
         self.data = data
         self.size = effect.param_size
         self.low, self.high = effect.param_bounds()
         self._rows = [seg.fit_rows for seg in data.segments]
         self._z_steps = [step_average_samples(seg.states.R_body_to_world[:, :, 2]) for seg in data.segments]
-        self._cache: tuple[float, tuple[list[np.ndarray], list[np.ndarray]]] | None = None
+        self._cache: tuple[bytes, tuple[list[np.ndarray], list[np.ndarray]]] | None = None
+
+    def unseen(self, theta: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
+        """The start errors whose segment's start the rows ``masks`` leave out: they carry under
+        :data:`SEEN_SHARE` of the start error's effect on all rows."""
+        out = np.zeros(self.size, dtype=bool)
+        if self.size == 1:
+            return out
+        _, jacobians = self.evaluate(theta)
+        for s, (jacobian, mask) in enumerate(zip(jacobians, masks)):
+            column = jacobian[:, :, 1 + s]
+            everywhere = float(np.sum(column**2))
+            out[1 + s] = everywhere == 0.0 or float(np.sum(column[mask] ** 2)) < SEEN_SHARE**2 * everywhere
+        return out
 
     def evaluate(self, theta: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, 1)`` per segment at the fit rows."""
-        tau = float(np.asarray(theta, dtype=float).reshape(-1)[0])
-        if self._cache is not None and self._cache[0] == tau:
+        """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, p)`` per segment at the fit rows."""
+        theta = np.asarray(theta, dtype=float).reshape(-1)
+        if self._cache is not None and self._cache[0] == theta.tobytes():
             return self._cache[1]
+        tau, starts = float(theta[0]), theta[1:]
         forces, jacobians = [], []
-        for seg, z_steps, rows in zip(self.data.segments, self._z_steps, self._rows):
-            force, jacobian = lag_force_steps(seg.thrust_logged, seg.t, z_steps, tau)
+        for s, (seg, z_steps, rows) in enumerate(zip(self.data.segments, self._z_steps, self._rows)):
+            start = float(starts[s]) if starts.size else 0.0
+            force, jacobian = lag_force_steps(seg.thrust_logged, seg.t, z_steps, tau, start)
+            smoothed = seg.kernel.step_average(jacobian, rows)
+            full = np.zeros(smoothed.shape[:2] + (self.size,))
+            full[:, :, 0] = smoothed[:, :, 0]
+            if starts.size:
+                full[:, :, 1 + s] = smoothed[:, :, 1]
             forces.append(seg.kernel.step_average(force, rows))
-            jacobians.append(seg.kernel.step_average(jacobian, rows))
-        self._cache = (tau, (forces, jacobians))
+            jacobians.append(full)
+        self._cache = (theta.tobytes(), (forces, jacobians))
         return forces, jacobians
 
 
-def lag_force_steps(thrust_logged: Any, t: np.ndarray, z_steps: np.ndarray,
-                    tau: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per step: ``(f(tau) - f_cmd) z_body`` ``(n - 1, 3)`` N and its derivative in ``tau`` ``(n - 1, 3, 1)``."""
+def lag_force_steps(thrust_logged: Any, t: np.ndarray, z_steps: np.ndarray, tau: float,
+                    start_error: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per step: ``(f(tau) - f_cmd) z_body`` ``(n - 1, 3)`` N, the rotors starting ``start_error`` N from the
+    first logged thrust, and its derivatives in ``tau`` and in ``start_error`` ``(n - 1, 3, 2)``."""
     thrust_logged = np.asarray(thrust_logged, dtype=float)
-    response = held_command_response(thrust_logged, float(np.mean(np.diff(t))), tau)
+    response = held_command_response(thrust_logged, float(np.mean(np.diff(t))), tau,
+                                     start=thrust_logged[0] + start_error)
     deficit = response.step_mean - thrust_logged[:-1]
-    return deficit[:, None] * z_steps, (response.d_step_mean_d_tau[:, None] * z_steps)[:, :, None]
+    slopes = np.stack([response.d_step_mean_d_tau, response.d_step_mean_d_start], axis=1)  # (n - 1, 2)
+    return deficit[:, None] * z_steps, slopes[:, None, :] * z_steps[:, :, None]

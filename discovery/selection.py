@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 from scipy.special import chdtri
 
-from discovery.fitting import EffectFit, FitResult, applicable
+from discovery.fitting import EffectFit, FitResult, applicable, term_key
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG, MotorLag
 from discovery.residuals import FlightData
 from wall_env.effects import Effect, make_effect
@@ -309,14 +309,15 @@ def _motor_lag(evaluator: _Evaluator, current: Candidate, nominal: Candidate, fl
     """
     from discovery.determination import undetermined_cases
 
-    evaluator.templates[LAG_KEY] = MotorLag()
+    template = MotorLag(segments=len(evaluator.data.segments))
+    evaluator.templates[LAG_KEY] = template
     if progress is not None:
         progress(f"trying {' + '.join(current.names + [LAG_KEY])}")
     cand = evaluator.evaluate(current.names + [LAG_KEY], previous=_params_by_name(current))
     lag, std = cand.fit.effects[-1], cand.fit.std_dicts()[-1]
     tau, tau_std = float(lag.values["time_constant"][0]), float(std["time_constant"])
-    cases = undetermined_cases([lag], [std])
-    forces = evaluator.terms[(LAG_KEY, ())].evaluate(np.array([tau]))[0]
+    cases = [c for c in undetermined_cases([lag], [std]) if c["name"] == "time_constant"]  # start errors: nuisance
+    forces = evaluator.terms[term_key(template)].evaluate(lag.param_vector())[0]
     force_rms = float(np.sqrt(np.mean(np.sum(np.concatenate(forces) ** 2, axis=1))))
     if cand.score >= current.score:
         reason = "it does not lower the held-out score"

@@ -131,7 +131,7 @@ class Effect(ABC):
                 raise ValueError(f"{self.name}.{option} must be a {type(default).__name__}, got {value!r}")
             self.option_values[option] = value
         # the parameters of this instance: the base ones plus those of the options switched on
-        self.parameters = type(self).parameters + tuple(  # type: ignore[misc]  # per instance: options add some
+        self.parameters = self.base_parameters() + tuple(  # type: ignore[misc]  # per instance: options add some
             p for option, params in self.optional_parameters.items() if self.option_values[option] for p in params)
         known_params = {p.name: p for p in self.parameters}
         unknown = sorted(set(kwargs) - set(known_params) - set(self.options))
@@ -143,6 +143,11 @@ class Effect(ABC):
         self.values: dict[str, np.ndarray] = {
             name: p.validate(self.name, kwargs.get(name, p.default)) for name, p in known_params.items()
         }
+
+    def base_parameters(self) -> tuple[Parameter, ...]:
+        """This instance's parameters before the optional ones: the class's, unless a subclass sizes
+        them by its options (:attr:`option_values` is set when this is called)."""
+        return type(self).parameters
 
     # ------------------------------------------------------------------ symbolic
     @abstractmethod
