@@ -57,6 +57,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--window", type=float, default=None, help="smoothing window of the differentiator (s)")
     parser.add_argument("--horizon", type=float, default=None, help="open-loop prediction horizon (s, default 0.5)")
     parser.add_argument("--no-plots", action="store_true", help="skip the figures")
+    parser.add_argument("--no-motor-lag", action="store_true",
+                        help="do not look for a motor lag (the vehicle's motor_time_constant stays as given, 0 if not)")
     parser.add_argument("--closed-loop", action="store_true",
                         help="also fly nominal MPC and SC-MPC from the discovered model in the log's world")
     parser.add_argument("--scenario", default=None,
@@ -124,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
     clashes = [str(p) for p in outputs if p.resolve() in resolved_inputs]
     if clashes:
         return _fail(f"output file(s) {clashes} would overwrite an input; choose another --out or --json")
-    settings = {}
+    settings: dict = {"motor_lag": not args.no_motor_lag}
     if args.window is not None:
         settings["window_s"] = args.window
     if args.horizon is not None:

@@ -97,7 +97,7 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "logs": _logs(found),
         "settings": {"candidates": found.candidates, "effect": found.effect, "window_s": found.window_s,
                      "block_s": found.block_s, "n_folds": found.n_folds, "horizon_s": found.horizon_s,
-                     "effective_samples_per_axis": round(selection.n_eff, 1)},
+                     "motor_lag": found.motor_lag, "effective_samples_per_axis": round(selection.n_eff, 1)},
         "residual_where": dict(found.where_before_),
         "selection": [{"chosen": step.chosen, "cv_mse_before_N2": step.mse_before, "cv_mse_after_N2": step.mse_after,
                        "tried": step.tried} for step in selection.steps],

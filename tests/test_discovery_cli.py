@@ -159,6 +159,16 @@ def test_discover_with_one_named_effect_fits_only_that(suction_log, tmp_path):
     assert not list(out.glob("*.png"))
 
 
+def test_discover_without_the_motor_lag_search(suction_log, tmp_path):
+    out = tmp_path / "no_lag"
+    assert main(["discover", str(suction_log), "--out", str(out), "--no-motor-lag", "--no-plots", "--quiet"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["details"]["settings"]["motor_lag"] is False
+    assert report["motor_lag"] is None  # nothing was looked for
+    assert [e["name"] for e in report["effects"]] == ["wall_suction"]
+    assert json.loads((out / "model.json").read_text())["vehicle"]["motor_time_constant"] == 0.0
+
+
 def test_discover_rejects_a_malformed_log_naming_file_column_and_row(suction_log, tmp_path, capsys):
     bad = tmp_path / "bad.csv"
     lines = suction_log.read_text().splitlines()
