@@ -153,8 +153,8 @@ class _Term:
             self.affine = True
             self._affine_base = [(f, j, a) for f, j in zip(fa, ja)]
 
-    def unseen(self, theta: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
-        """Nuisance parameters the rows ``masks`` do not see: an effect has none."""
+    def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
+        """Nuisance parameters a fold must hold at their defaults: an effect has none."""
         return np.zeros(self.size, dtype=bool)
 
     def evaluate(self, theta: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -334,12 +334,13 @@ class EffectFit:
         for k in range(self.data.n_folds):
             masks = [seg.train_mask[k][rows] for seg, rows in zip(self.data.segments, self.rows)]
             if self.terms and any(m.any() for m in masks):
-                # a nuisance parameter the training rows do not see (a lag's start error, its segment's start
-                # held out) is not fitted to them: it takes its default, so held-out rows never see a value
-                # fitted to themselves
-                unseen = np.concatenate([t.unseen(th, masks) for t, th in zip(self.terms, self._split(full.theta))])
-                start = np.where(unseen, self._defaults, full.theta)
-                theta_k = self._solve(start, masks, CV_TOL, free=~unseen).x
+                # a nuisance parameter that reaches the held-out rows (a lag's start error, its segment's start
+                # held out) is not fitted: it takes its default, so no held-out row sees a value fitted to it
+                held = [folds == k for folds in self.folds]
+                fixed = np.concatenate([t.fold_fixed(th, masks, held)
+                                        for t, th in zip(self.terms, self._split(full.theta))])
+                start = np.where(fixed, self._defaults, full.theta)
+                theta_k = self._solve(start, masks, CV_TOL, free=~fixed).x
             else:
                 theta_k = full.theta.copy()
             fold_theta.append(theta_k)

@@ -16,8 +16,8 @@ So, once the effects are chosen, :func:`discovery.selection.forward_selection` (
 how far the rotors were from the logged thrust at the segment's first sample. A log begun in
 mid-air, or a stretch after a gap, need not start settled; taking it so biased a 30 ms lag
 10-25 % low on the second simulator's logs, which start with the rotors at hover under a
-command far from it. A cross-validation fold that holds a segment's start out takes that
-start settled (:meth:`LagTerm.unseen`). The lag is kept when it lowers the held-out score,
+command far from it. A cross-validation fold whose held-out rows a start error reaches takes
+that start settled (:meth:`LagTerm.fold_fixed`), so the errors never fit held-out rows. The lag is kept when it lowers the held-out score,
 the force it accounts for is at least the weight share an effect must explain, and its 95 %
 interval is away from zero and from :data:`MAX_FITTED_S`. A lag so found is not an
 aerodynamic effect: it becomes the vehicle's ``motor_time_constant``, the logs are prepared
@@ -43,7 +43,7 @@ __all__ = ["MotorLag", "LagTerm", "MAX_FITTED_S", "MAX_START_ERROR_N", "LAG_KEY"
 LAG_KEY = "motor_lag"
 UNDETERMINED_LAG = "the flight does not determine it"
 MAX_FITTED_S = 0.25  # s, the longest lag discovery fits (hobby motors: 10-100 ms)
-SEEN_SHARE = 1e-3  # rows carrying less of a start error's effect (rms) than this leave it unseen
+SEEN_SHARE = 1e-3  # share of a start error's effect (rms) that rows must carry to count as seeing it
 MAX_START_ERROR_N = 1e4  # N, bound of a segment's start error (a range, not a prior: far above any rotor's thrust)
 
 
@@ -58,12 +58,16 @@ class MotorLag(Effect):
     description = "the rotors produce the logged thrust late (first-order lag)"
     reference = "first-order motor model (wall_env.motor_lag)"
     parameters = (Parameter("time_constant", "s", 0.02, 0.0, MAX_FITTED_S, "first-order motor time constant"),)
-    options = {"segments": 0}  # segments whose start error is fitted (0: every segment starts settled)
+    # segments: how many segments' start errors are fitted (0: every segment starts settled);
+    # thrust_scale: the scale of the chosen effects' thrust_scale, which the lagging thrust also has
+    options = {"segments": 0, "thrust_scale": 1.0}
 
     def base_parameters(self) -> tuple[Parameter, ...]:
         segments = self.option_values["segments"]
         if segments < 0:
             raise ValueError(f"{self.name}.segments must be >= 0, got {segments}")
+        if not 0.0 < self.option_values["thrust_scale"] < float("inf"):
+            raise ValueError(f"{self.name}.thrust_scale must be a positive number, got {self.option_values['thrust_scale']}")
         if not segments:
             return type(self).parameters
         return type(self).parameters + (Parameter(
@@ -82,6 +86,11 @@ class LagTerm:
     must be what the nominal model took as produced (a vehicle without a lag). With the
     effect's ``segments`` option equal to the number of segments, segment ``s`` starts at
     ``f_cmd + e_s`` (its ``start_error``); with 0, every segment starts settled.
+
+    A thrust scale ``c`` among the effects acts on the logged thrust, while the rotors produce
+    ``c f(tau)``: the lag's force is then ``c (f(tau) - f_cmd)``, or a fitted ``tau`` comes out
+    ``c`` times the true one (26.3 ms for 30 ms under a 0.91 scale on the second simulator). The
+    effect's ``thrust_scale`` option is that ``c``, taken from the effects chosen before the lag.
     """
 
     affine = False
@@ -94,23 +103,24 @@ class LagTerm:
             raise ValueError(f"{effect.name}.segments must be 0 or the number of segments, {len(data.segments)}; "
                              f"got {segments}")
         self.data = data
+        self.scale = effect.option_values["thrust_scale"]
         self.size = effect.param_size
         self.low, self.high = effect.param_bounds()
         self._rows = [seg.fit_rows for seg in data.segments]
         self._z_steps = [step_average_samples(seg.states.R_body_to_world[:, :, 2]) for seg in data.segments]
         self._cache: tuple[bytes, tuple[list[np.ndarray], list[np.ndarray]]] | None = None
 
-    def unseen(self, theta: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
-        """The start errors whose segment's start the rows ``masks`` leave out: they carry under
-        :data:`SEEN_SHARE` of the start error's effect on all rows."""
+    def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
+        """The start errors a cross-validation fold holds settled (0): those whose effect (rms) reaches its
+        held-out rows ``held`` by :data:`SEEN_SHARE` or more, or its training rows ``train`` by less."""
         out = np.zeros(self.size, dtype=bool)
         if self.size == 1:
             return out
         _, jacobians = self.evaluate(theta)
-        for s, (jacobian, mask) in enumerate(zip(jacobians, masks)):
+        for s, (jacobian, train_rows, held_rows) in enumerate(zip(jacobians, train, held)):
             column = jacobian[:, :, 1 + s]
-            everywhere = float(np.sum(column**2))
-            out[1 + s] = everywhere == 0.0 or float(np.sum(column[mask] ** 2)) < SEEN_SHARE**2 * everywhere
+            share = SEEN_SHARE**2 * float(np.sum(column**2))
+            out[1 + s] = float(np.sum(column[held_rows] ** 2)) >= share or float(np.sum(column[train_rows] ** 2)) <= share
         return out
 
     def evaluate(self, theta: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -123,12 +133,12 @@ class LagTerm:
         for s, (seg, z_steps, rows) in enumerate(zip(self.data.segments, self._z_steps, self._rows)):
             start = float(starts[s]) if starts.size else 0.0
             force, jacobian = lag_force_steps(seg.thrust_logged, seg.t, z_steps, tau, start)
-            smoothed = seg.kernel.step_average(jacobian, rows)
+            smoothed = self.scale * seg.kernel.step_average(jacobian, rows)
             full = np.zeros(smoothed.shape[:2] + (self.size,))
             full[:, :, 0] = smoothed[:, :, 0]
             if starts.size:
                 full[:, :, 1 + s] = smoothed[:, :, 1]
-            forces.append(seg.kernel.step_average(force, rows))
+            forces.append(self.scale * seg.kernel.step_average(force, rows))
             jacobians.append(full)
         self._cache = (theta.tobytes(), (forces, jacobians))
         return forces, jacobians

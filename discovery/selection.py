@@ -167,9 +167,23 @@ class _Evaluator:
             fit = problem.fit(previous=start)
             cv, _ = problem.cross_validate(fit)
             axes = _mse_axes(cv)
-            priced = int(fit.theta.size) + sum(options_without_parameters(self.templates[n]) for n in names)
+            priced = sum(priced_parameters(self.templates[n]) for n in names)
             self.cache[key] = Candidate(list(names), fit, cv, float(axes.sum()), axes, score(axes, priced, self.n_eff))
         return self.cache[key]
+
+
+def priced_parameters(effect: Effect) -> int:
+    """How many parameters the score prices ``effect`` at: its own, plus its options without parameters.
+
+    A motor lag's segment start errors are not priced: a cross-validation fold whose held-out rows
+    a start error reaches takes that start settled (:meth:`discovery.motor_lag.LagTerm.fold_fixed`),
+    so no held-out row is predicted with a start error fitted to it and the errors cannot flatter
+    the held-out score; they only keep the time constant from being biased by a start the rotors
+    were not settled at.
+    """
+    if isinstance(effect, MotorLag):
+        return 1
+    return effect.param_size + options_without_parameters(effect)
 
 
 def options_without_parameters(effect: Effect) -> int:
@@ -309,7 +323,8 @@ def _motor_lag(evaluator: _Evaluator, current: Candidate, nominal: Candidate, fl
     """
     from discovery.determination import undetermined_cases
 
-    template = MotorLag(segments=len(evaluator.data.segments))
+    scale = [float(e.values["scale"][0]) for e in current.fit.effects if e.name == "thrust_scale"]
+    template = MotorLag(segments=len(evaluator.data.segments), thrust_scale=scale[0] if scale else 1.0)
     evaluator.templates[LAG_KEY] = template
     if progress is not None:
         progress(f"trying {' + '.join(current.names + [LAG_KEY])}")

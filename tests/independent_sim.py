@@ -6,7 +6,8 @@ following their commands with a 30 ms lag), a 1.3 kg vehicle, a white force dist
 measurement noise, and optionally rotors whose thrust follows the command with a first-order
 lag (integrated as a state). The hidden effects are written from the literature forms: wall
 suction per rotor (Yang et al., Eq. 6, 10), quadratic drag on the air-relative velocity in a
-steady wind, linear body drag, a steady force. The log is written as the flight-log format's CSV and sidecar,
+steady wind, linear body drag, a steady force, and a thrust scale (the rotors produce a fixed
+share of the thrust they are commanded, lag and all). The log is written as the flight-log format's CSV and sidecar,
 directly, without the project's writer.
 """
 
@@ -69,7 +70,7 @@ def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, d
         thrust_dot = (thrust - produced) / motor_lag
     else:
         produced, thrust_dot = thrust, 0.0
-    force = produced * R[:, 2] + hidden_force(effects, p, v, R) + disturbance
+    force = effects.get("thrust_scale", 1.0) * produced * R[:, 2] + hidden_force(effects, p, v, R) + disturbance
     return (v, force / MASS - np.array([0, 0, GRAVITY]), 0.5 * _qmul(q, np.array([0.0, *w])), (w_cmd - w) / _RATE_LAG,
             thrust_dot)
 

@@ -7,7 +7,10 @@ import json
 
 import pytest
 
+from discovery.fitting import EffectFit
 from discovery.flight_log import read_log
+from discovery.motor_lag import MotorLag
+from discovery.residuals import prepare
 from discovery.workflow import Discovery
 from tests.discovery_support import relative_errors
 from tests.independent_sim import fly, write
@@ -91,3 +94,40 @@ def test_a_motor_lag_is_found_when_the_rotors_start_away_from_their_command(tmp_
     lag = found.motor_lag_
     assert lag["kept"] and lag["time_constant_s"] == pytest.approx(0.03, rel=0.1)
     assert max(relative_errors(found.effects_[0].values, {"D": D})) < 0.05
+
+
+def test_a_motor_lag_under_a_thrust_scale(tmp_path):
+    """The rotors produce 0.85 of their lagging thrust: fitted on the logged thrust, the lag came out 0.85 of the
+    true one; it is fitted under the thrust scale found first."""
+    rows = fly({"thrust_scale": 0.85}, centre=(1.5, 0.0, 1.0), amplitude=(1.0, 1.0, 0.4), period=(5.0, 6.0, 3.0),
+               duration=60.0, rate_hz=100.0, seed=8, motor_lag=0.03)
+    found = _discover(write(rows, tmp_path / "scale.csv", seed=8, wall=False))
+    assert found.names_ == ["thrust_scale"]
+    assert found.effects_[0].values["scale"][0] == pytest.approx(0.85, rel=0.02)
+    assert found.motor_lag_["kept"] and found.motor_lag_["time_constant_s"] == pytest.approx(0.03, rel=0.07)
+
+
+def test_a_start_error_is_never_fitted_to_the_rows_it_is_scored_on(tmp_path):
+    """Cross-validation holds a segment's start error settled (0) in the folds whose held-out rows it reaches, and
+    fits it in the others."""
+    rows = fly({}, centre=(1.5, 0.0, 1.0), amplitude=(1.0, 1.0, 0.4), period=(5.0, 6.0, 3.0), duration=40.0,
+               rate_hz=100.0, seed=7, motor_lag=0.04)
+    data = prepare([read_log(write(rows[:1500] + rows[1550:], tmp_path / "gap.csv", seed=7, wall=False))])
+    assert len(data.segments) == 2
+    problem = EffectFit(data, [MotorLag(segments=2)], data.residuals(data.nominal_model))
+    full = problem.fit()
+    assert full.theta[0] == pytest.approx(0.04, rel=0.1)
+    assert full.theta[1] == pytest.approx(4.8, rel=0.2)  # the rotors start at hover, 12.75 N, under 7.96 N
+    _, fold_theta = problem.cross_validate(full)
+    for s, seg in enumerate(data.segments):
+        # folds holding out a sample within half a window plus 5 time constants of the start hold it settled
+        reach = seg.t < seg.t[0] + 0.5 + 5 * 0.04
+        near = {int(k) for k in seg.fold[reach]}
+        assert seg.fold[0] in near
+        for k, theta in enumerate(fold_theta):
+            if k in near:
+                assert theta[1 + s] == 0.0
+            else:  # and the others fit it
+                assert theta[1 + s] != 0.0
+    others = [float(theta[1]) for k, theta in enumerate(fold_theta) if k != 0]
+    assert others == pytest.approx([float(full.theta[1])] * 4, rel=0.05)
