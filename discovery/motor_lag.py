@@ -17,9 +17,10 @@ how far the rotors were from the logged thrust at the segment's first sample. A 
 mid-air, or a stretch after a gap, need not start settled; taking it so biased a 30 ms lag
 10-25 % low on the second simulator's logs, which start with the rotors at hover under a
 command far from it. A cross-validation fold whose held-out rows a start error reaches takes
-that start settled (:meth:`LagTerm.fold_fixed`), so the errors never fit held-out rows. The lag is kept when it lowers the held-out score,
-the force it accounts for is at least the weight share an effect must explain, and its 95 %
-interval is away from zero and from :data:`MAX_FITTED_S`. A lag so found is not an
+that start settled (:meth:`LagTerm.fold_fixed`), so the errors never fit held-out rows. The
+lag is kept when it lowers the held-out score and its 95 % interval is away from zero and
+from :data:`MAX_FITTED_S`, however small its force: a determined lag biases what is fitted
+next to it (see :func:`discovery.selection._motor_lag`). A lag so found is not an
 aerodynamic effect: it becomes the vehicle's ``motor_time_constant``, the logs are prepared
 again with the lagged thrust and the effects are chosen again on them
 (:class:`discovery.workflow.Discovery`). A vehicle block that gives ``motor_time_constant``

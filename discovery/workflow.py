@@ -219,6 +219,15 @@ class Discovery:
             self.limits_.append({"effects": [LAG_KEY], "reason": f"a motor lag would pay for itself but {lag['reason']}"
                                  " (a lag and a vertical drag look alike on a climb and descent at one pace)",
                                  "manoeuvre": determining_manoeuvre(LAG_KEY, "time_constant")})
+        elif lag is not None and not lag["kept"] and lag["determined"] and lag["moves"]:
+            move = lag["moves"]
+            self.limits_.append({
+                "effects": [LAG_KEY, move["effect"]],
+                "reason": f"a motor lag of {1e3 * lag['time_constant_s']:.3g} +- {1e3 * lag['std_s']:.2g} ms fits this "
+                          f"flight but does not lower the held-out score, and with it {move['effect']} "
+                          f"{move['parameter']} would be {move['with']:.4g} instead of {move['without']:.4g}: the "
+                          "flight cannot tell the lag from that effect",
+                "manoeuvre": determining_manoeuvre(LAG_KEY, "time_constant")})
         chosen = selection.chosen
         # only what the flight determined goes into the model (discovery.determination)
         self.effects_, self.param_std_, self.undetermined_ = determined(list(chosen.fit.effects),

@@ -96,6 +96,22 @@ def test_a_motor_lag_is_found_when_the_rotors_start_away_from_their_command(tmp_
     assert max(relative_errors(found.effects_[0].values, {"D": D})) < 0.05
 
 
+def test_a_lag_too_small_to_pay_is_reported_with_the_parameter_it_would_move(tmp_path):
+    """An 8 ms lag on one climb-and-descent pace: the drag absorbs it (D_z 12 % low) and the held-out score cannot
+    tell the two apart, so the lag is not kept; the report says so, naming the drag entry and the manoeuvre."""
+    D = [0.17, 0.23, 0.39]
+    rows = fly({"linear_drag": D}, centre=(1.5, 0.0, 1.0), amplitude=(1.0, 1.0, 0.4), period=(5.0, 6.0, 3.0),
+               duration=60.0, rate_hz=100.0, seed=56, motor_lag=0.008)
+    found = _discover(write(rows, tmp_path / "small.csv", seed=56, wall=False))
+    lag = found.motor_lag_
+    assert found.names_ == ["linear_drag"] and not lag["kept"] and lag["determined"]
+    assert lag["moves"]["parameter"] == "D[2]"
+    assert lag["moves"]["with"] == pytest.approx(D[2], rel=0.05)  # with the lag, the drag is right
+    limit = next(x for x in found.limits_ if "motor_lag" in x["effects"])
+    assert limit["effects"] == ["motor_lag", "linear_drag"] and "D[2]" in limit["reason"]
+    assert "different lengths" in limit["manoeuvre"]
+
+
 def test_a_motor_lag_under_a_thrust_scale(tmp_path):
     """The rotors produce 0.85 of their lagging thrust: fitted on the logged thrust, the lag came out 0.85 of the
     true one; it is fitted under the thrust scale found first."""
