@@ -14,8 +14,8 @@ Keys:
     or one effect was fitted alone), else the lag fitted next to the chosen effects
     (:mod:`discovery.motor_lag`): ``{"time_constant_s", "std_s", "explained", "force_rms_N",
     "kept", "reason", "determined", "moves"}`` (``moves``: the chosen parameter the lag would
-    change most, when by more than 5 % and two standard errors). A kept lag is the model file's vehicle ``motor_time_constant``, and the
-    effects above were chosen with it.
+    change most, when by more than 5 % and two standard errors). A kept lag is the model
+    file's vehicle ``motor_time_constant``, and the effects above were chosen with it.
 ``gap_before``, ``gap_after``
     ``{"force_rms_N", "prediction_rms_m"}`` on held-out data for the nominal and the
     discovered model: RMS of the force residual (vector norm, N) and of the open-loop

@@ -311,9 +311,10 @@ def _motor_lag(evaluator: _Evaluator, current: Candidate, nominal: Candidate, pr
     """A motor lag fitted jointly with the chosen effects (:mod:`discovery.motor_lag`), and whether it counts.
 
     It counts when it lowers the held-out score and its 95 % interval is away from zero and from
-    its bounds: ``{"time_constant_s", "std_s", "explained", "force_rms_N", "kept", "reason"}``
-    (``explained``: the share of the nominal held-out energy it adds to the chosen effects;
-    ``force_rms_N``: the force it accounts for).
+    its bounds: ``{"time_constant_s", "std_s", "explained", "force_rms_N", "kept", "reason",
+    "determined", "moves"}`` (``explained``: the share of the nominal held-out energy it adds to
+    the chosen effects; ``force_rms_N``: the force it accounts for; ``determined``: its interval
+    is away from zero and its bounds; ``moves``: :func:`_moves`).
 
     Unlike an effect it need not explain a share of the force gap the chosen effects leave, nor a
     share of the weight. It is not an effect to be named but a property of the vehicle, and one
