@@ -358,13 +358,15 @@ MOVE_SHARE = 0.05
 def _moves(current: Candidate, with_lag: Candidate) -> dict | None:
     """The chosen effects' parameter entry that the lag moves most, if one moves by more than
     :data:`MOVE_SHARE` of its value and two standard errors: ``{"effect", "parameter", "without", "with"}``."""
+    # the chosen effects come first in the lag's fit, packed alike
+    labels = [(e.name, label) for e in current.fit.effects for label in e.param_labels()]
+    without, errors = current.fit.theta, current.fit.param_std
+    with_ = with_lag.fit.theta[:without.size]
     best, largest = None, MOVE_SHARE
-    for before, after, std in zip(current.fit.effects, with_lag.fit.effects, current.fit.std_dicts()):
-        errors = np.concatenate([np.atleast_1d(np.asarray(std[p.name], dtype=float)) for p in before.parameters])
-        for label, x, y, error in zip(before.param_labels(), before.param_vector(), after.param_vector(), errors):
-            share = abs(y - x) / abs(x) if x != 0 else 0.0
-            if share > largest and abs(y - x) > 2 * error:
-                best, largest = {"effect": before.name, "parameter": label, "without": float(x), "with": float(y)}, share
+    for (name, label), x, y, error in zip(labels, without, with_, errors):
+        share = abs(y - x) / abs(x) if x != 0 else 0.0
+        if share > largest and abs(y - x) > 2 * error:
+            best, largest = {"effect": name, "parameter": label, "without": float(x), "with": float(y)}, share
     return best
 
 
