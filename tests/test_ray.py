@@ -11,8 +11,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
-import time
 
 import optuna
 import pytest
@@ -104,7 +102,7 @@ def test_tune_through_ray_tunes_optuna_searcher(cluster, tmp_path):
 
 
 # ====================================================================== train --ray
-STEPS, EVERY = 40960, 4096  # a few seconds of batched training: long enough to be killed after a checkpoint
+STEPS, EVERY = 40960, 4096  # a few seconds of batched training with ten checkpoints: a restart resumes mid-run
 TINY_TRAIN = ["train", "--env", "WallHover-v0", "--timesteps", str(STEPS), "--n-envs", "2", "--workers", "1",
               "--set", "ppo.n_steps=128", "--set", "ppo.batch_size=256", "--set", "ppo.n_epochs=1",
               "--set", "card_eval.episodes=1", "--set", "env_kwargs.duration=1.0", "--eval-freq", "1000000",
@@ -144,33 +142,44 @@ def test_bad_train_ray_options_are_one_line_usage_errors(tmp_path, capsys, args,
     assert message in err and len(err.strip().splitlines()) == 1 and not out.exists()
 
 
-def _kill_a_trial_after_its_first_checkpoint(storage, killed: list, stop: threading.Event) -> None:
-    """SIGKILL the Ray worker of the first trial that has handed over a checkpoint."""
-    while not stop.is_set():
-        for results in sorted(storage.glob("ray/ray/*/result.json")):
-            lines = [json.loads(line) for line in results.read_text().splitlines() if line.strip()]
-            if lines and not lines[-1]["finished"] and list(results.parent.glob("checkpoint_*")):
-                os.kill(int(lines[-1]["pid"]), signal.SIGKILL)
-                killed.append((results.parent.name, int(lines[-1]["timesteps"])))
-                return
-        time.sleep(0.05)
+class _KillAtFirstCheckpoint:
+    """A Ray Tune callback that SIGKILLs the worker of the first trial whose checkpoint Ray Tune takes.
+
+    It acts on the event itself, not on a guess of how long training takes: a function trial
+    waits inside ``tune.report`` until the driver asks for its next result, and Ray Tune calls
+    ``on_checkpoint`` in the driver before it does, so the trial is still mid-run, blocked at
+    that checkpoint, when it is killed, however fast the machine trains."""
+
+    def __init__(self):
+        from ray import tune
+
+        class Callback(tune.Callback):
+            def on_checkpoint(inner, iteration, trials, trial, checkpoint, **info):
+                result = trial.last_result
+                if not self.killed and not result.get("finished"):
+                    os.kill(int(result["pid"]), signal.SIGKILL)
+                    self.killed.append((trial.trial_id, int(result["timesteps"])))
+
+        self.killed: list = []
+        self.callback = Callback()
 
 
 def test_train_sweep_of_two_trials_survives_a_killed_worker(cluster, tmp_path):
+    import argparse
+
+    from wall_inspector import train as train_command
+    from wall_inspector import train_on_ray
+
     space = tmp_path / "space.yaml"
     space.write_text("ppo.learning_rate: [3.0e-4, 1.0e-3]\n")
     out = tmp_path / "runs"
-    killed: list = []
-    stop = threading.Event()
-    killer = threading.Thread(target=_kill_a_trial_after_its_first_checkpoint, args=(out, killed, stop), daemon=True)
-    killer.start()
-    try:
-        code = cli_main([*TINY_TRAIN, "--sweep", str(space), "--out", str(out), "--ray", cluster.address,
-                         "--cpus-per-trial", "1"])
-    finally:
-        stop.set()
-        killer.join()
-    assert code == 0 and len(killed) == 1
+    parser = argparse.ArgumentParser()
+    train_command.add_arguments(parser)
+    args = parser.parse_args([*TINY_TRAIN[1:], "--sweep", str(space), "--out", str(out), "--ray", cluster.address,
+                              "--cpus-per-trial", "1"])
+    killer = _KillAtFirstCheckpoint()
+    code = train_on_ray.run(args, callbacks=[killer.callback])
+    assert code == 0 and len(killer.killed) == 1 and killer.killed[0][1] == EVERY
     rows = json.loads((out / "summary.json").read_text())["runs"]
     assert [r["set"] for r in rows] == [["ppo.learning_rate=0.0003"], ["ppo.learning_rate=0.001"]]
     assert all(r["timesteps"] == STEPS for r in rows)

@@ -177,7 +177,9 @@ def _summary_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace, *, callbacks: list[Any] | None = None) -> int:
+    """The command's body. ``callbacks``: further Ray Tune callbacks (``ray.tune.Callback``) for the
+    run, e.g. a logger; they run in this process, where Ray Tune handles each trial's results."""
     from wall_inspector import ray_backend
 
     try:
@@ -200,7 +202,8 @@ def run(args: argparse.Namespace) -> int:
             param_space={"run": tune.grid_search(list(range(len(runs))))},
             tune_config=tune.TuneConfig(num_samples=1),
             run_config=tune.RunConfig(name="ray", storage_path=str(out / "ray"), verbose=0 if args.quiet else 1,
-                                      failure_config=tune.FailureConfig(max_failures=args.max_failures)),
+                                      failure_config=tune.FailureConfig(max_failures=args.max_failures),
+                                      callbacks=list(callbacks or [])),
         )
         grid = tuner.fit()
     rows = []
