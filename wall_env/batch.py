@@ -10,10 +10,20 @@ adds Gymnasium's autoreset around the same object. Random numbers come from per-
 streams (:mod:`wall_env.streams`), so row ``k`` seeded with ``s`` flies exactly as a
 single env seeded with ``s``.
 
+Flight conditions (:mod:`wall_env.conditions`) act on every row: the command reaches the
+rotors through a delay line and the compiled step's per-row timing (latency in whole
+physics steps, motor lag), the wind through the drag effects' parameters, and the
+observation is built from the estimated state: the state the observation delay makes
+stale, with the state-estimate error on top. The reward, the termination and ``info``
+are of the true state. In ideal conditions none of this runs.
+
 Random draws of an episode, per row and in this order: at reset, one uniform per
-randomised setting (``k_s``, ``d_thr``, ``standoff``, ``mass``, those configured) and nine
-for the start perturbation (position, velocity, roll/pitch/yaw); at each step, four
-normals for the command noise (none without noise).
+randomised setting (:data:`~wall_env.config.RANDOMIZABLE` order, those configured; a push
+takes one more for its direction) and nine for the start perturbation (position,
+velocity, roll/pitch/yaw), then twelve normals for the sensing biases (with a sensing
+error) and six for the turbulence's start (with turbulence); at each step, four normals for
+the command noise (none without noise), six for the turbulence and 24 for the sensing
+error (each only when configured).
 """
 
 from __future__ import annotations
@@ -22,9 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from wall_env.config import EnvConfig
+from wall_env.conditions import DelayLine, SensingErrors, TurbulenceState
+from wall_env.conditions.latency import split_delay
+from wall_env.config import DRAG_EFFECTS, EnvConfig
 from wall_env.contact import SURFACES
-from wall_env.dynamics import STATE_SIZE, BatchSimulator, StateIndex
+from wall_env.dynamics import STATE_SIZE, BatchSimulator, StateIndex, Timing
 from wall_env.observation import CLEARANCE_CAP, OBSERVATION_FIELDS, OBSERVATION_SIZE, PREVIEW_STEPS
 from wall_env.rotations import euler_xyz_to_quat_rows, quat_to_rotation_rows
 from wall_env.streams import RandomStreams
@@ -77,7 +89,7 @@ class EnvBatch:
         scene, reference = cfg.build()
         self.configured = (scene, reference)  # the configured scene and reference (each episode's may differ)
         self.simulator = BatchSimulator(cfg.vehicle, cfg.truth, scene.structure, cfg.control_dt,
-                                        cfg.physics_substeps, n)
+                                        cfg.physics_substeps, n, lagged=cfg.lagged)
         self.streams = RandomStreams(n)
         sim = self.simulator
         sim.restitution[:] = cfg.restitution
@@ -118,6 +130,69 @@ class EnvBatch:
         self.distances = np.zeros((n, 4 * self._n_walls))  # column-major (n_walls x 4) per row
         self.ref_offset = np.zeros((n, 3))
         self.episode_parameters = {key: np.zeros(n) for key in cfg.randomize}
+        self._init_conditions()
+
+    def _init_conditions(self) -> None:
+        """The per-row state of the flight conditions (none of it in ideal conditions)."""
+        cfg, n = self.config, self.n
+        conditions = cfg.conditions
+        substeps = cfg.physics_substeps
+        self._hover_command = self._mapping.to_physical(np.zeros((1, 4)))
+        # latency, in physics steps per row: the configured one, or drawn at reset
+        command_steps, observation_steps = conditions.latency.physics_steps(cfg.physics_dt)
+        self.command_delay = np.full(n, command_steps, dtype=np.int64)
+        self.observation_delay = np.full(n, observation_steps, dtype=np.int64)
+        longest = max(command_steps, observation_steps)
+        if "latency" in cfg.randomize:
+            longest = int(round(cfg.randomize["latency"][1] / cfg.physics_dt))
+        depth = longest // substeps + 2
+        self._commands = DelayLine(n, depth, 4) if longest else None
+        self._observed = DelayLine(n, depth, STATE_SIZE) if longest else None
+        self._set_delays(slice(None))
+        self._sensing = (SensingErrors(conditions.sensing, n, cfg.control_dt)
+                         if not conditions.sensing.is_zero else None)
+        turbulence = conditions.wind.turbulence
+        self._turbulence = TurbulenceState(turbulence, n, cfg.control_dt) if turbulence is not None else None
+        self._mean_wind = np.asarray(conditions.wind.mean, dtype=float)
+        self._wind_columns = [c for c in (cfg.parameter_columns(e, "w") for e in DRAG_EFFECTS) if c is not None]
+        self._push_columns = cfg.parameter_columns("constant_force", "F") if "push" in cfg.randomize else None
+        # the observation is of the true state unless a delay or an estimate error stands between them
+        self.ideal_observation = self._observed is None and self._sensing is None
+        self.x_estimate = self.simulator.x if self.ideal_observation else np.zeros((n, STATE_SIZE))
+        self.R_estimate = self.R if self.ideal_observation else np.zeros((n, 9))
+        self.distances_estimate = self.distances if self.ideal_observation else np.zeros((n, 4 * self._n_walls))
+
+    def _set_delays(self, rows: np.ndarray | slice) -> None:
+        """The compiled step's command switch and observation sample for the delays of ``rows``."""
+        substeps = self.config.physics_substeps
+        timing = self.simulator.timing
+        timing[rows, Timing.command_switch] = split_delay(self.command_delay[rows], substeps)[1]
+        timing[rows, Timing.observe_after] = substeps - split_delay(self.observation_delay[rows], substeps)[1]
+
+    def _geometry(self, x: np.ndarray, scene: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``R_body_to_world`` (column-major, ``(k, 9)``) and rotor-wall distances (``(k, 4 n_walls)``,
+        column-major ``n_walls x 4``) of states ``x`` ``(k, 17)`` in scenes ``(k, S)``."""
+        k = x.shape[0]
+        R = quat_to_rotation_rows(x[:, StateIndex.q_body_to_world])  # (k, 3, 3)
+        distances = np.zeros((k, 4 * self._n_walls))
+        if self._n_walls:
+            rotors_world = x[:, StateIndex.p_world, None] + (R.reshape(3 * k, 3) @ self._rotors.T).reshape(k, 3, 4)
+            walls = scene[:, : 6 * self._n_walls].reshape(k, self._n_walls, 2, 3)
+            normals, points = walls[:, :, 1], walls[:, :, 0]
+            # n . (r - c) for every wall and rotor, written out over the three axes (NumPy's batched
+            # matmul of 1x3 by 3x4 matrices costs more than these six array operations)
+            d = -(normals * points).sum(axis=2)[:, :, None]  # (k, walls, 4)
+            for axis in range(3):
+                d = d + normals[:, :, axis, None] * rotors_world[:, None, axis, :]
+            distances = d.transpose(0, 2, 1).reshape(k, -1)
+        return R.transpose(0, 2, 1).reshape(k, 9), distances
+
+    def _estimate(self, rows: np.ndarray | slice, x_seen: np.ndarray) -> None:
+        """The estimated state of ``rows`` from the state their observation shows (``x_seen``) and their
+        current sensing error."""
+        x_est = SensingErrors.apply(x_seen, self._sensing.error[rows]) if self._sensing is not None else x_seen
+        self.x_estimate[rows] = x_est
+        self.R_estimate[rows], self.distances_estimate[rows] = self._geometry(x_est, self.simulator.scene[rows])
 
     # ------------------------------------------------------------------ reset
     def reset(self, rows: np.ndarray | slice, spread: np.ndarray | float = 1.0) -> None:
@@ -126,7 +201,8 @@ class EnvBatch:
         cfg, sim = self.config, self.simulator
         task = cfg.task
         ranges = cfg.randomize
-        u = self.streams.uniform(rows, len(ranges) + 9)
+        pushed = "push" in ranges
+        u = self.streams.uniform(rows, len(ranges) + pushed + 9)
         k = u.shape[0]
         sample = {}
         for j, (key, (low, high)) in enumerate(ranges.items()):
@@ -138,9 +214,20 @@ class EnvBatch:
             for name, column in self._suction_columns.items():
                 if name in sample:
                     theta[:, column] = sample[name]
+            if self._push_columns is not None:
+                heading = 2.0 * np.pi * u[:, len(ranges)]
+                theta[:, self._push_columns] = sample["push"][:, None] * np.stack(
+                    [np.cos(heading), np.sin(heading), np.zeros(k)], axis=1)
             sim.theta[rows] = theta
         mass = sample.get("mass", cfg.vehicle.mass)
         sim.mass[rows, 0] = mass
+        if "motor_time_constant" in sample:
+            sim.timing[rows, Timing.motor_time_constant] = sample["motor_time_constant"]
+        if "latency" in sample:
+            total = np.round(sample["latency"] / cfg.physics_dt).astype(np.int64)
+            self.command_delay[rows] = total // 2
+            self.observation_delay[rows] = total - total // 2
+            self._set_delays(rows)
         if "standoff" in sample:
             shift = sample["standoff"] - geometry.standoff
             sim.scene[rows] = geometry.scene_vector + shift[:, None] * geometry.scene_rate
@@ -150,7 +237,7 @@ class EnvBatch:
         self.ref_offset[rows] = offset
 
         spread = np.reshape(np.asarray(spread, dtype=float), (-1, 1))
-        perturb = (2.0 * u[:, len(ranges):] - 1.0) * spread
+        perturb = (2.0 * u[:, len(ranges) + pushed:] - 1.0) * spread
         p0 = self._ref_p[0] + offset + perturb[:, 0:3] * task.start_position_noise
         v0 = self._ref_v[0] + perturb[:, 3:6] * task.start_velocity_noise
         tilt = perturb[:, 6:9] * task.start_attitude_noise
@@ -163,18 +250,7 @@ class EnvBatch:
         x[:, StateIndex.omega_body] = 0.0
         x[:, StateIndex.rotor_thrusts] = np.reshape(mass * (GRAVITY / 4.0), (-1, 1))
         sim.x[rows] = x
-        R = quat_to_rotation_rows(q)  # (k, 3, 3)
-        self.R[rows] = R.transpose(0, 2, 1).reshape(k, 9)
-        if self._n_walls:
-            rotors_world = p0[:, :, None] + (R.reshape(3 * k, 3) @ self._rotors.T).reshape(k, 3, 4)
-            walls = sim.scene[rows, : 6 * self._n_walls].reshape(k, self._n_walls, 2, 3)
-            normals, points = walls[:, :, 1], walls[:, :, 0]
-            # n . (r - c) for every wall and rotor, written out over the three axes (NumPy's batched
-            # matmul of 1x3 by 3x4 matrices costs more than these six array operations)
-            d = -(normals * points).sum(axis=2)[:, :, None]  # (k, walls, 4)
-            for axis in range(3):
-                d = d + normals[:, :, axis, None] * rotors_world[:, None, axis, :]
-            self.distances[rows] = d.transpose(0, 2, 1).reshape(k, -1)
+        self.R[rows], self.distances[rows] = self._geometry(x, sim.scene[rows])
         self.step_index[rows] = 0
         self.previous_action[rows] = 0.0
         self.collisions[rows] = 0
@@ -182,6 +258,28 @@ class EnvBatch:
         self.surface[rows] = 0
         self.strayed[rows] = False
         self.forces[rows] = 0.0
+        self._reset_conditions(rows, x, sample)
+
+    def _reset_conditions(self, rows: np.ndarray | slice, x: np.ndarray, sample: dict[str, np.ndarray]) -> None:
+        """A new episode's past for the delay lines, its sensing biases and its turbulence."""
+        k = x.shape[0]
+        if self._commands is not None and self._observed is not None:  # before the first command: hover
+            self._commands.fill(rows, np.repeat(self._hover_command, k, axis=0))
+            self._observed.fill(rows, x)
+        if self._sensing is not None:
+            self._sensing.reset(rows, self.streams.normal(rows, SensingErrors.RESET_NORMALS),
+                                sample.get("sensing_scale", 1.0))
+        if self._turbulence is not None:
+            self._turbulence.reset(rows, self.streams.normal(rows, TurbulenceState.NORMALS),
+                                   sample.get("gust_scale", 1.0))
+            wind = self._mean_wind + self._turbulence.gust_world()[rows]
+            for columns in self._wind_columns:
+                self.simulator.theta[rows, columns] = wind
+        elif self._wind_columns:
+            for columns in self._wind_columns:
+                self.simulator.theta[rows, columns] = self._mean_wind
+        if not self.ideal_observation:
+            self._estimate(rows, x)
 
     # ------------------------------------------------------------------ step
     def step(self, actions: np.ndarray, active: np.ndarray | None = None
@@ -197,7 +295,18 @@ class EnvBatch:
         command = self._mapping.to_physical(a)
         if cfg.noise:
             command += self.streams.step_normals(4, active) * self._noise_std
-        sim.u[:] = command
+        if self._commands is not None:  # the rotors act on commands issued some steps ago
+            self._commands.push(command)
+            whole = self.command_delay // cfg.physics_substeps
+            sim.u[:] = self._commands.read(whole)
+            sim.u_previous[:] = self._commands.read(whole + 1)
+        else:
+            sim.u[:] = command
+        if self._turbulence is not None:
+            self._turbulence.step(self.streams.step_normals(TurbulenceState.NORMALS, active))
+            wind = self._mean_wind + self._turbulence.gust_world()
+            for columns in self._wind_columns:
+                sim.theta[:, columns] = wind
         sim.step()
         sim.x[:] = sim.x_next
         self.R[:] = sim.R
@@ -205,6 +314,15 @@ class EnvBatch:
         self.forces[:] = sim.forces
         self.command[:] = command
         self.step_index += 1
+        if not self.ideal_observation:
+            if self._observed is not None:
+                self._observed.push(sim.x_observed)
+                x_seen = self._observed.read(self.observation_delay // cfg.physics_substeps)
+            else:
+                x_seen = sim.x
+            if self._sensing is not None:
+                self._sensing.step(self.streams.step_normals(SensingErrors.STEP_NORMALS, active), active)
+            self._estimate(slice(None), x_seen)
 
         touching = sim.penetrations > 0.0
         contact = touching.any(axis=1)
@@ -236,24 +354,24 @@ class EnvBatch:
     def observations(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """Observations of ``rows`` (default all), ``(k, 48)`` float32 (layout: :mod:`wall_env.observation`)."""
         f = OBSERVATION_FIELDS
-        x = self.simulator.x[rows]
+        x = self.x_estimate[rows]
         i = self.step_index[rows]
         n = x.shape[0]
         ref = self._ref_table[i]  # p_ref, v_ref, preview
         obs = np.empty((n, OBSERVATION_SIZE), dtype=np.float32)
         obs[:, f["p_world"]] = x[:, StateIndex.p_world]
         obs[:, f["v_world"]] = x[:, StateIndex.v_world]
-        obs[:, f["R_body_to_world"]] = self.R[rows][:, _ROW_MAJOR]
+        obs[:, f["R_body_to_world"]] = self.R_estimate[rows][:, _ROW_MAJOR]
         obs[:, f["omega_body"]] = x[:, StateIndex.omega_body]
         obs[:, f["p_error"]] = x[:, StateIndex.p_world] - (ref[:, 0:3] + self.ref_offset[rows])
         obs[:, f["v_error"]] = x[:, StateIndex.v_world] - ref[:, 3:6]
         obs[:, f["reference_preview"]] = ref[:, 6:]
         if self._n_walls:
             if self._n_walls == 1:
-                obs[:, f["rotor_clearance"]] = np.minimum(self.distances[rows], CLEARANCE_CAP)
+                obs[:, f["rotor_clearance"]] = np.minimum(self.distances_estimate[rows], CLEARANCE_CAP)
                 obs[:, f["wall_normal"]] = self.simulator.scene[rows, 3:6]
             else:
-                d = self.distances[rows].reshape(n, 4, self._n_walls)  # [row, rotor, wall]
+                d = self.distances_estimate[rows].reshape(n, 4, self._n_walls)  # [row, rotor, wall]
                 obs[:, f["rotor_clearance"]] = np.minimum(d.min(axis=2), CLEARANCE_CAP)
                 nearest = np.argmin(d.min(axis=1), axis=1)
                 normals = self.simulator.scene[rows, : 6 * self._n_walls].reshape(n, self._n_walls, 2, 3)[:, :, 1]

@@ -19,9 +19,10 @@ import numpy as np
 
 from wall_env.actions import ActionMapping
 from wall_env.aero import AeroModel
+from wall_env.conditions import MAX_LATENCY, FlightConditions
 from wall_env.effects import effects_from_spec, make_effect
 from wall_env.model_file import FlightModel, nominal_aero_model
-from wall_env.motor_lag import MAX_TIME_CONSTANT
+from wall_env.motor_lag import MAX_TIME_CONSTANT, MIN_LAG_STEPS
 from wall_env.observation import PREVIEW_DT, PREVIEW_STEPS
 from wall_env.references import Reference
 from wall_env.scene import Scene
@@ -32,7 +33,13 @@ from wall_env.vehicle import GRAVITY, VehicleParams
 __all__ = ["EnvConfig", "DEFAULT_REWARD_WEIGHTS", "RANDOMIZABLE", "RENDER_MODES", "MAX_EPISODE_STEPS"]
 
 DEFAULT_REWARD_WEIGHTS = {"alive": 1.0, "position": 2.0, "velocity": 0.2, "smoothness": 0.1, "body_rate": 0.01}
-RANDOMIZABLE = ("k_s", "d_thr", "standoff", "mass")
+# per-episode settings the envs can draw, in the order of the random draws at reset: the suction's k_s (N/m)
+# and d_thr (m), the stand-off (m) and mass (kg); a steady horizontal push (N, its direction uniform in the
+# horizontal plane: one more draw), the rotors' time constant (s), the latency (s, the round trip, split
+# evenly between command and observation, in whole physics steps), and factors on the configured sensing
+# error and turbulence intensity
+RANDOMIZABLE = ("k_s", "d_thr", "standoff", "mass", "push", "motor_time_constant", "latency", "sensing_scale",
+                "gust_scale")
 RENDER_MODES = ("human", "rgb_array")
 MAX_EPISODE_STEPS = 1_000_000  # the longest episode (duration / control_dt) any settings allow
 
@@ -89,6 +96,22 @@ def _truth_model(vehicle: VehicleParams, k_s: Any, d_thr: Any, effects: Any) -> 
     return model.with_effect(make_effect("wall_suction", **params, **options))
 
 
+DRAG_EFFECTS = ("linear_drag", "quadratic_drag")
+
+
+def _with_conditions(truth: AeroModel, conditions: FlightConditions, push: bool) -> AeroModel:
+    """The simulator's model under ``conditions``: in wind, every drag effect acts on the air-relative velocity
+    (its ``wind`` parameter, which the envs set from the wind at every step); a randomised ``push`` needs a
+    ``constant_force`` to draw into."""
+    if not conditions.wind.is_still:
+        for effect in truth.effects:
+            if effect.name in DRAG_EFFECTS and not effect.option_values["wind"]:
+                truth = truth.with_effect(make_effect(effect.name, **effect.params_dict(), wind=True))
+    if push and truth.get("constant_force") is None:
+        truth = truth.with_effect(make_effect("constant_force"))
+    return truth
+
+
 @dataclass(frozen=True)
 class StandoffGeometry:
     """Scene vector and reference of a task as affine functions of the stand-off ``s``:
@@ -131,6 +154,7 @@ class EnvConfig:
     render_size: tuple[int, int]
     min_standoff: float
     geometry: StandoffGeometry = field(repr=False)
+    conditions: FlightConditions = field(default_factory=FlightConditions)
 
     @classmethod
     def from_kwargs(
@@ -158,6 +182,7 @@ class EnvConfig:
         control_dt: float = 0.01,
         physics_substeps: int = 10,
         motor_time_constant: float | None = None,
+        conditions: Any = None,
         ground_z: float | None = 0.0,
         ceiling_z: float | None = None,
         render_mode: str | None = None,
@@ -189,6 +214,11 @@ class EnvConfig:
         else:
             vehicle_params = _load_vehicle(vehicle)
             truth = _truth_model(vehicle_params, k_s, d_thr, effects)
+        flight_conditions = FlightConditions.from_spec(conditions)
+        if motor_time_constant is not None and flight_conditions.motor_time_constant is not None:
+            raise ValueError("the motor lag is given twice: as motor_time_constant and in conditions; give one")
+        if flight_conditions.motor_time_constant is not None:
+            motor_time_constant = flight_conditions.motor_time_constant
         if motor_time_constant is not None:
             vehicle_params = vehicle_params.replace(
                 motor_time_constant=check_range("motor_time_constant", motor_time_constant, 0.0, MAX_TIME_CONSTANT))
@@ -226,7 +256,14 @@ class EnvConfig:
             ceiling_z = check_range("ceiling_z", ceiling_z, altitude + 0.1, 1000.0)
         base_scene = Scene((), ground_z, ceiling_z)
         params = spec.check_params(task_params)
-        ranges = _check_randomize(randomize, truth, vehicle_params, lowest)
+        truth = _with_conditions(truth, flight_conditions, push=isinstance(randomize, dict) and "push" in randomize)
+        ranges = _check_randomize(randomize, truth, vehicle_params, lowest, flight_conditions)
+        physics_dt = control_dt / int(physics_substeps)
+        flight_conditions.latency.physics_steps(physics_dt)  # whole physics steps, or a ValueError
+        lags = [vehicle_params.motor_time_constant, *ranges.get("motor_time_constant", ())]
+        if any(0 < tau < MIN_LAG_STEPS * physics_dt for tau in lags):
+            raise ValueError(f"motor_time_constant must be 0 or at least one physics step, {physics_dt * 1e3:g} ms "
+                             f"(control_dt / physics_substeps), got {min(t for t in lags if t > 0) * 1e3:g} ms")
         geometry = _standoff_geometry(spec, standoff, altitude, duration, base_scene, params, control_dt)
 
         return cls(
@@ -240,7 +277,7 @@ class EnvConfig:
             reward_weights=weights, standoff=standoff, altitude=altitude, duration=duration,
             base_scene=base_scene, task_params=params, randomize=ranges, render_mode=render_mode,
             render_size=(width, height),
-            min_standoff=lowest, geometry=geometry,
+            min_standoff=lowest, geometry=geometry, conditions=flight_conditions,
         )
 
     # ------------------------------------------------------------------ derived
@@ -270,13 +307,30 @@ class EnvConfig:
     def hover_rotor_thrust(self) -> float:
         return self.vehicle.mass * GRAVITY / 4.0
 
+    @property
+    def physics_dt(self) -> float:
+        """Seconds per physics step (RK4 substep)."""
+        return self.control_dt / self.physics_substeps
+
+    @property
+    def lagged(self) -> bool:
+        """Whether any episode's rotors lag (rotor thrusts are then state of the compiled step)."""
+        return self.vehicle.motor_time_constant > 0 or max(self.randomize.get("motor_time_constant", (0, 0))) > 0
+
+    def parameter_columns(self, effect: str, name: str) -> slice | None:
+        """Columns of parameter ``name`` of ``effect`` (all its entries) in the simulator's vector ``theta``;
+        ``None`` if the simulator has no such parameter."""
+        labels = self.truth.param_labels()
+        columns = [i for i, label in enumerate(labels) if label.split("[")[0] == f"{effect}.{name}"]
+        return slice(columns[0], columns[-1] + 1) if columns else None
+
 
 def _preview_stride(control_dt: float) -> int:
     return max(1, int(round(PREVIEW_DT / control_dt)))
 
 
 def _check_randomize(ranges: Any, truth: AeroModel, vehicle: VehicleParams,
-                     lowest_standoff: float) -> dict[str, tuple[float, float]]:
+                     lowest_standoff: float, conditions: FlightConditions) -> dict[str, tuple[float, float]]:
     if ranges is None:
         return {}
     if not isinstance(ranges, dict):
@@ -303,6 +357,26 @@ def _check_randomize(ranges: Any, truth: AeroModel, vehicle: VehicleParams,
             lo, hi = lowest_standoff, 5.0
         elif key == "mass":
             lo, hi = 0.05, vehicle.thrust_max / GRAVITY * 0.9
+        elif key == "push":
+            lo, hi = 0.0, 50.0
+        elif key == "motor_time_constant":
+            if conditions.motor_time_constant is not None or vehicle.motor_time_constant > 0:
+                raise ValueError("randomize['motor_time_constant'] draws the motor lag; do not also give one")
+            lo, hi = 0.0, MAX_TIME_CONSTANT
+        elif key == "latency":
+            if conditions.latency.seconds > 0:
+                raise ValueError("randomize['latency'] draws the latency; do not also give it in conditions")
+            lo, hi = 0.0, 2 * MAX_LATENCY
+        elif key == "sensing_scale":
+            if conditions.sensing.is_zero:
+                raise ValueError("randomize['sensing_scale'] scales the sensing error of conditions, which has none; "
+                                 "give conditions={'sensing': 'motion_capture'} or another")
+            lo, hi = 0.0, 10.0
+        elif key == "gust_scale":
+            if conditions.wind.turbulence is None:
+                raise ValueError("randomize['gust_scale'] scales the turbulence of conditions, which has none; "
+                                 "give conditions={'wind': 'light'} or another")
+            lo, hi = 0.0, 10.0
         else:
             if key not in limits:
                 raise ValueError(f"{name} needs the wall_suction effect in the simulator")

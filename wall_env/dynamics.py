@@ -1,18 +1,23 @@
 """The simulator's flight dynamics, one control step as one compiled CasADi function.
 
-State ``x`` (17 numbers): ``p_world`` (3, m), ``q_body_to_world`` (4, [w, x, y, z]),
-``v_world`` (3, m/s), ``omega_body`` (3, rad/s), ``rotor_thrusts`` (4, N).
+State ``x`` (17 numbers, :mod:`wall_env.state`): ``p_world`` (3, m), ``q_body_to_world``
+(4, [w, x, y, z]), ``v_world`` (3, m/s), ``omega_body`` (3, rad/s), ``rotor_thrusts`` (4, N).
 
 Input ``u`` (4 numbers): collective thrust command ``T`` (N) and body-rate command
 ``omega_cmd`` (3, rad/s), command noise already added, held over the control step.
+Per-vehicle conditions (:class:`Timing`, :mod:`wall_env.conditions`): a command that
+arrives late flies ``u_previous`` for the first ``command_switch`` substeps; the state
+after ``observe_after`` substeps is returned beside the final one (what a late estimate
+shows); ``motor_time_constant`` is each vehicle's rotor lag when the step is built with
+lag.
 
 At the physics rate (``substeps`` per control step, RK4 each) the vehicle's inner loop
 does what a flight controller's rate loop does:
 
 1. body-rate controller: ``tau_des = J K (omega_cmd - omega) + omega x J omega``;
 2. mixer: rotor thrusts ``f_des = mixer [T; tau_des]``, clipped to ``[0, thrust_max / 4]``;
-3. optional first-order motor lag ``df/dt = (f_des - f) / tau_m`` (:mod:`wall_env.motor_lag`; otherwise
-   ``f = f_des``);
+3. optional first-order motor lag ``df/dt = (f_des - f) / tau_m`` (:mod:`wall_env.motor_lag`; otherwise,
+   and for a vehicle whose ``tau_m`` is 0, ``f = f_des``);
 4. rigid body (paper Eq. 3 with Eq. 5's extra force):
    ``dp/dt = v``, ``dv/dt = -g e3 + (R e3 sum(f) + F_aero) / m``,
    ``dq/dt = q * [0, omega] / 2``, ``J domega/dt = tau(f) + M_aero - omega x J omega``
@@ -24,7 +29,8 @@ identification code use.
 Why 1 kHz physics under 100 Hz control: the rate loop has a 20 ms time constant and
 motor lag can be a few ms; ten RK4 substeps keep the integration error of those fast
 modes far below the command noise, and because the whole control step is one native
-call the substeps cost microseconds.
+call the substeps cost microseconds. RK4 needs ``tau_m`` of at least a physics step to
+follow a lag (:data:`wall_env.motor_lag.MIN_LAG_STEPS`).
 """
 
 from __future__ import annotations
@@ -42,23 +48,11 @@ from wall_env.effects import FlightContext
 from wall_env.motor_lag import thrust_rate
 from wall_env.rotations import quat_multiply, quat_to_rotation
 from wall_env.scene import Scene
+from wall_env.state import STATE_SIZE, StateIndex
 from wall_env.vehicle import GRAVITY, VehicleParams
 
-__all__ = ["STATE_SIZE", "StateIndex", "build_step_function", "build_env_step_function", "Simulator",
-           "BatchSimulator"]
-
-STATE_SIZE = 17
-
-
-class StateIndex:
-    """Slices of the simulator state vector."""
-
-    p_world = slice(0, 3)
-    q_body_to_world = slice(3, 7)
-    v_world = slice(7, 10)
-    omega_body = slice(10, 13)
-    rotor_thrusts = slice(13, 17)
-
+__all__ = ["STATE_SIZE", "StateIndex", "Timing", "build_step_function", "build_env_step_function",
+           "Simulator", "BatchSimulator"]
 
 def _commanded_rotor_thrusts(vehicle: VehicleParams, omega: ca.SX, u: ca.SX) -> ca.SX:
     """Rate loop and mixer: rotor thrusts for command ``u`` at body rates ``omega``, clipped to the rotor limits."""
@@ -69,9 +63,19 @@ def _commanded_rotor_thrusts(vehicle: VehicleParams, omega: ca.SX, u: ca.SX) -> 
     return ca.fmin(ca.fmax(f_des, 0.0), vehicle.rotor_thrust_max)
 
 
-def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structure: tuple) -> ca.Function:
+class Timing:
+    """Entries of the per-vehicle ``timing`` input of the control step."""
+
+    command_switch = 0  # substeps (0..substeps) that still fly u_previous
+    observe_after = 1  # substeps (0..substeps) after which the state is sampled into x_observed
+    motor_time_constant = 2  # s, the rotor lag (used when the step is built with lag)
+    size = 3
+
+
+def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structure: tuple, lagged: bool) -> ca.Function:
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", 4)
+    tau_m = ca.SX.sym("motor_time_constant")
     mass = ca.SX.sym("mass")
     theta = ca.SX.sym("theta", model.param_size)
     scene_symbols, scene_vector = symbolic_scene(scene_structure)
@@ -84,9 +88,10 @@ def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structu
     gyro = ca.cross(omega, J * omega)
 
     f_des = _commanded_rotor_thrusts(vehicle, omega, u)
-    if vehicle.motor_time_constant > 0:
-        f_act = f
-        f_dot = thrust_rate(f_des, f, vehicle.motor_time_constant)
+    if lagged:  # a vehicle whose time constant is 0 still follows its command at once
+        has_lag = tau_m > 0
+        f_act = ca.if_else(has_lag, f, f_des)
+        f_dot = ca.if_else(has_lag, thrust_rate(f_des, f, ca.fmax(tau_m, 1e-9)), ca.SX.zeros(4))
     else:
         f_act = f_des
         f_dot = ca.SX.zeros(4)
@@ -103,14 +108,14 @@ def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structu
     omega_dot = (moments + aero.moment_body - gyro) / J
     x_dot = ca.vertcat(p_dot, q_dot, v_dot, omega_dot, f_dot)
     forces = ca.horzcat(*effect_forces) if effect_forces else ca.SX.zeros(3, 0)
-    return ca.Function("flight_dynamics", [x, u, mass, theta, scene_vector], [x_dot, forces, f_act])
+    return ca.Function("flight_dynamics", [x, u, tau_m, mass, theta, scene_vector], [x_dot, forces, f_act])
 
 
-def _rk4_substep(dynamics: ca.Function, h: float, vehicle: VehicleParams) -> ca.Function:
-    lagged = vehicle.motor_time_constant > 0
+def _rk4_substep(dynamics: ca.Function, h: float, vehicle: VehicleParams, lagged: bool) -> ca.Function:
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", 4)
     args = [ca.SX.sym(dynamics.name_in(i), dynamics.sparsity_in(i)) for i in range(2, dynamics.n_in())]
+    tau_m = args[0]
     k1, forces, _ = dynamics(x, u, *args)
     k2 = dynamics(x + h / 2 * k1, u, *args)[0]
     k3 = dynamics(x + h / 2 * k2, u, *args)[0]
@@ -118,42 +123,55 @@ def _rk4_substep(dynamics: ca.Function, h: float, vehicle: VehicleParams) -> ca.
     x_next = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     q = x_next[StateIndex.q_body_to_world]
     x_next[StateIndex.q_body_to_world] = q / ca.norm_2(q)
-    if not lagged:  # rotor thrusts are algebraic: report those of the new state (rate loop and mixer only)
-        x_next[StateIndex.rotor_thrusts] = _commanded_rotor_thrusts(vehicle, x_next[StateIndex.omega_body], u)
+    # rotor thrusts without lag are algebraic: report those of the new state (rate loop and mixer only)
+    algebraic = _commanded_rotor_thrusts(vehicle, x_next[StateIndex.omega_body], u)
+    if lagged:
+        x_next[StateIndex.rotor_thrusts] = ca.if_else(tau_m > 0, x_next[StateIndex.rotor_thrusts], algebraic)
+    else:
+        x_next[StateIndex.rotor_thrusts] = algebraic
     return ca.Function("rk4_substep", [x, u, *args], [x_next, forces])
 
 
 @lru_cache(maxsize=32)
 def build_step_function(
-    vehicle: VehicleParams, structure_key: tuple, scene_structure: tuple, control_dt: float, substeps: int
+    vehicle: VehicleParams, structure_key: tuple, scene_structure: tuple, control_dt: float, substeps: int,
+    lagged: bool = False,
 ) -> ca.Function:
     """CasADi function of one control step.
 
-    ``control_step(x[17], u[4], mass, theta, scene) -> (x_next[17],
-    effect_forces_mean[3 x n_effects], rotor_wall_distances[n_walls x 4], R_body_to_world[3x3])``
+    ``control_step(x[17], u[4], u_previous[4], timing[3], mass, theta, scene) -> (x_next[17],
+    effect_forces_mean[3 x n_effects], rotor_wall_distances[n_walls x 4], R_body_to_world[3x3], x_observed[17])``
 
+    ``timing`` as :class:`Timing`: substeps ``i < command_switch`` fly ``u_previous``, the others
+    ``u``; ``x_observed`` is the state after ``observe_after`` substeps (0: the step's start);
+    ``motor_time_constant`` is the rotor lag when ``lagged`` (built in: rotor thrusts are state).
     The effect forces are averaged over the substeps; the rotor-wall distances are
     the signed distances of the rotor centres of ``x_next`` to each wall, and the
     rotation matrix is that of ``x_next``.
-    ``vehicle`` enters with its mass ignored (mass is an input, so it can be
-    randomised without rebuilding).
+    ``vehicle`` enters with its mass and motor time constant ignored (both are inputs, so they
+    can be randomised without rebuilding).
     """
     from wall_env.effects import make_effect
 
     model = AeroModel([make_effect(name, **dict(options)) for name, options in structure_key])
-    dynamics = _continuous_dynamics(vehicle, model, scene_structure)
-    substep = _rk4_substep(dynamics, control_dt / substeps, vehicle)
+    dynamics = _continuous_dynamics(vehicle, model, scene_structure, lagged)
+    substep = _rk4_substep(dynamics, control_dt / substeps, vehicle, lagged)
 
     x = ca.MX.sym("x", STATE_SIZE)
     u = ca.MX.sym("u", 4)
+    u_previous = ca.MX.sym("u_previous", 4)
+    timing = ca.MX.sym("timing", Timing.size)
     mass = ca.MX.sym("mass")
     theta = ca.MX.sym("theta", model.param_size)
-    scene = ca.MX.sym("scene", dynamics.size1_in(4))
+    scene = ca.MX.sym("scene", dynamics.size1_in(5))
     forces_sum = ca.MX.zeros(3, len(model.effects))
     state = x
-    for _ in range(substeps):
-        state, forces = substep(state, u, mass, theta, scene)
+    observed = ca.if_else(timing[Timing.observe_after] < 0.5, x, ca.MX.zeros(STATE_SIZE))
+    for i in range(substeps):
+        u_i = ca.if_else(timing[Timing.command_switch] > i + 0.5, u_previous, u)
+        state, forces = substep(state, u_i, timing[Timing.motor_time_constant], mass, theta, scene)
         forces_sum += forces
+        observed += ca.if_else(ca.fabs(timing[Timing.observe_after] - (i + 1)) < 0.5, state, ca.MX.zeros(STATE_SIZE))
 
     # rotor-wall distances of the final state
     xs = ca.SX.sym("x", STATE_SIZE)
@@ -169,26 +187,28 @@ def build_step_function(
 
     return ca.Function(
         "control_step",
-        [x, u, mass, theta, scene],
-        [state, forces_sum / substeps, distances_next, R_next],
-        ["x", "u", "mass", "theta", "scene"],
-        ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world"],
+        [x, u, u_previous, timing, mass, theta, scene],
+        [state, forces_sum / substeps, distances_next, R_next, observed],
+        ["x", "u", "u_previous", "timing", "mass", "theta", "scene"],
+        ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world", "x_observed"],
     )
 
 
 @lru_cache(maxsize=32)
 def build_env_step_function(
-    vehicle: VehicleParams, structure_key: tuple, scene_structure: tuple, control_dt: float, substeps: int
+    vehicle: VehicleParams, structure_key: tuple, scene_structure: tuple, control_dt: float, substeps: int,
+    lagged: bool = False,
 ) -> ca.Function:
     """The environments' control step: :func:`build_step_function` followed by the closed-form
     contact response (:mod:`wall_env.contact`).
 
-    ``env_step(x[17], u[4], mass, theta, scene, restitution) -> (x_next[17],
+    ``env_step(x[17], u[4], u_previous[4], timing[3], mass, theta, scene, restitution) -> (x_next[17],
     effect_forces_world[3 x n_effects], rotor_wall_distances[n_walls x 4], R_body_to_world[3x3],
-    penetrations[n_planes])``: the state, distances and rotation after the response; the
-    penetrations before it (one per plane: walls, ground, ceiling).
+    penetrations[n_planes], x_observed[17])``: the state, distances and rotation after the response; the
+    penetrations before it (one per plane: walls, ground, ceiling); ``x_observed`` as
+    :func:`build_step_function` (after the response when it is the step's end state).
     """
-    step = build_step_function(vehicle, structure_key, scene_structure, control_dt, substeps)
+    step = build_step_function(vehicle, structure_key, scene_structure, control_dt, substeps, lagged)
     xs = ca.SX.sym("x", STATE_SIZE)
     restitution = ca.SX.sym("restitution")
     scene_symbols, scene_vector = symbolic_scene(scene_structure)
@@ -203,44 +223,60 @@ def build_env_step_function(
 
     x = ca.MX.sym("x", STATE_SIZE)
     u = ca.MX.sym("u", 4)
+    u_previous = ca.MX.sym("u_previous", 4)
+    timing = ca.MX.sym("timing", Timing.size)
     mass = ca.MX.sym("mass")
-    theta = ca.MX.sym("theta", step.size1_in(3))
-    scene = ca.MX.sym("scene", step.size1_in(4))
+    theta = ca.MX.sym("theta", step.size1_in(5))
+    scene = ca.MX.sym("scene", step.size1_in(6))
     e = ca.MX.sym("restitution")
-    x_next, forces, _, R_next = step(x, u, mass, theta, scene)
+    x_next, forces, _, R_next, observed = step(x, u, u_previous, timing, mass, theta, scene)
     x_after_contact, distances_after, depth = respond(x_next, scene, e)
+    observed = ca.if_else(timing[Timing.observe_after] > substeps - 0.5, x_after_contact, observed)
     return ca.Function(
         "env_step",
-        [x, u, mass, theta, scene, e],
-        [x_after_contact, forces, distances_after, R_next, depth],
-        ["x", "u", "mass", "theta", "scene", "restitution"],
-        ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world", "penetrations"],
+        [x, u, u_previous, timing, mass, theta, scene, e],
+        [x_after_contact, forces, distances_after, R_next, depth, observed],
+        ["x", "u", "u_previous", "timing", "mass", "theta", "scene", "restitution"],
+        ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world", "penetrations", "x_observed"],
     )
+
+
+def _step_key(vehicle: VehicleParams) -> VehicleParams:
+    """The vehicle as the compiled step's cache key: mass and motor time constant are inputs."""
+    return dataclasses.replace(vehicle, mass=1.0, motor_time_constant=0.0)
 
 
 class BatchSimulator:
     """The environments' compiled step (:func:`build_env_step_function`) for ``n`` vehicles in one call.
 
     The per-vehicle inputs are rows of arrays that this object owns and the caller fills
-    in place: ``x (n, 17)``, ``u (n, 4)``, ``mass (n, 1)``, ``theta (n, P)``, ``scene (n, S)``,
-    ``restitution (n, 1)``. :meth:`step` writes the outputs, also owned arrays:
-    ``x_next (n, 17)``, ``forces (n, 3 * n_effects)`` (column-major ``3 x n_effects`` per row),
-    ``distances (n, n_walls * 4)`` (column-major ``n_walls x 4``), ``R (n, 9)`` (column-major)
-    and ``penetrations (n, n_planes)``.
+    in place: ``x (n, 17)``, ``u (n, 4)``, ``u_previous (n, 4)``, ``timing (n, 3)`` (:class:`Timing`),
+    ``mass (n, 1)``, ``theta (n, P)``, ``scene (n, S)``, ``restitution (n, 1)``. :meth:`step` writes the
+    outputs, also owned arrays: ``x_next (n, 17)``, ``forces (n, 3 * n_effects)`` (column-major
+    ``3 x n_effects`` per row), ``distances (n, n_walls * 4)`` (column-major ``n_walls x 4``), ``R (n, 9)``
+    (column-major), ``penetrations (n, n_planes)`` and ``x_observed (n, 17)``. ``lagged``: rotor
+    thrusts are state and follow each row's ``timing[:, Timing.motor_time_constant]`` (default: lagged
+    when the vehicle has a motor time constant).
     """
 
     def __init__(self, vehicle: VehicleParams, model: AeroModel, scene_structure: tuple, control_dt: float,
-                 substeps: int, n: int):
-        key_vehicle = dataclasses.replace(vehicle, mass=1.0)
-        function = build_env_step_function(key_vehicle, model.structure_key, scene_structure, control_dt, substeps)
+                 substeps: int, n: int, lagged: bool | None = None):
+        lagged = vehicle.motor_time_constant > 0 if lagged is None else bool(lagged)
+        function = build_env_step_function(_step_key(vehicle), model.structure_key, scene_structure, control_dt,
+                                           substeps, lagged)
         # compiled for the host CPU, as the controllers' solves are: about a tenth faster per vehicle
         self._step = BatchedFunction(function, NATIVE_FLAGS)
         self.n = n
-        self.x, self.u, self.mass, self.theta, self.scene, self.restitution = (
-            np.zeros((n, size)) for size in self._step.nnz_in)
-        self.x_next, self.forces, self.distances, self.R, self.penetrations = self._step.outputs(n)
-        self._step.bind([self.x, self.u, self.mass, self.theta, self.scene, self.restitution],
-                        [self.x_next, self.forces, self.distances, self.R, self.penetrations])
+        self.substeps = substeps
+        self.lagged = lagged
+        (self.x, self.u, self.u_previous, self.timing, self.mass, self.theta, self.scene,
+         self.restitution) = (np.zeros((n, size)) for size in self._step.nnz_in)
+        self.timing[:, Timing.observe_after] = substeps
+        self.timing[:, Timing.motor_time_constant] = vehicle.motor_time_constant
+        self.x_next, self.forces, self.distances, self.R, self.penetrations, self.x_observed = self._step.outputs(n)
+        self._step.bind([self.x, self.u, self.u_previous, self.timing, self.mass, self.theta, self.scene,
+                         self.restitution],
+                        [self.x_next, self.forces, self.distances, self.R, self.penetrations, self.x_observed])
 
     def step(self) -> None:
         """Advance every vehicle one control step (inputs and outputs: the arrays above)."""
@@ -248,7 +284,8 @@ class BatchSimulator:
 
 
 class Simulator:
-    """Numeric front end of the compiled control step for one vehicle, model and scene structure."""
+    """Numeric front end of the compiled control step for one vehicle, model and scene structure
+    (commands act at once, the vehicle's own motor lag)."""
 
     def __init__(self, vehicle: VehicleParams, model: AeroModel, scene: Scene, control_dt: float, substeps: int):
         self.vehicle = vehicle
@@ -256,9 +293,10 @@ class Simulator:
         self.scene = scene
         self.control_dt = control_dt
         self.substeps = substeps
-        key_vehicle = dataclasses.replace(vehicle, mass=1.0)
-        function = build_step_function(key_vehicle, model.structure_key, scene.structure, control_dt, substeps)
+        function = build_step_function(_step_key(vehicle), model.structure_key, scene.structure, control_dt, substeps,
+                                       vehicle.motor_time_constant > 0)
         self._step = CompiledFunction(function)
+        self._timing = np.array([0.0, substeps, vehicle.motor_time_constant])
         self.mass = vehicle.mass
         self.theta = model.theta()
         self.scene_vector = scene.to_vector()
@@ -283,7 +321,7 @@ class Simulator:
         Returns ``x_next``, the effect forces ``(3, n_effects)`` (mean over the step), the
         rotor-wall distances ``(n_walls, 4)`` and ``R_body_to_world`` ``(3, 3)`` of ``x_next``.
         """
-        x_next, forces, distances, R = self._step(x, u, self.mass, self.theta, self.scene_vector)
+        x_next, forces, distances, R, _ = self._step(x, u, u, self._timing, self.mass, self.theta, self.scene_vector)
         return (x_next, forces.reshape(3, -1, order="F"), distances.reshape(self.n_walls, 4, order="F"),
                 R.reshape(3, 3, order="F"))
 

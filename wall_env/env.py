@@ -27,6 +27,9 @@ Info
     ``collision_surface``, ``collisions`` (count this episode), ``wall_clearance``
     (m, nearest duct edge to a wall), ``command`` (the noisy physical command), ``time``,
     ``strayed`` (bool).
+Conditions
+    ``conditions="realistic"`` adds state-estimate error, latency, motor lag and turbulence
+    (:mod:`wall_env.conditions`); the observation then holds the estimated state.
 Contact
     closed form against the scene's planes (:mod:`wall_env.contact`), the same code as the
     batched env; PyBullet holds the scene for pictures (``render``) and the human viewer.
@@ -93,7 +96,13 @@ class WallInspectorEnv(gym.Env):
     model: a model file (:class:`~wall_env.model_file.FlightModel`) that sets the vehicle and
         every effect of the simulator; then ``vehicle``, ``k_s``, ``d_thr`` and ``effects`` must be unset.
     randomize: per-episode uniform ranges, e.g. ``{"k_s": (2, 8), "mass": (0.9, 1.1)}``, for
-        ``k_s``, ``d_thr``, ``standoff``, ``mass``.
+        ``k_s``, ``d_thr``, ``standoff``, ``mass``, ``push`` (N, a steady horizontal force in a random
+        direction), ``motor_time_constant`` (s), ``latency`` (s, the round trip), ``sensing_scale`` and
+        ``gust_scale`` (factors on the sensing error and turbulence of ``conditions``).
+    conditions: flight conditions (:mod:`wall_env.conditions`): ``"ideal"`` (default), ``"realistic"``
+        (motion-capture sensing, 20 ms latency, 30 ms motor lag, light turbulence) or a dict of
+        ``sensing``, ``latency``, ``motor_time_constant`` and ``wind``. The observation then carries the
+        estimated state (late and with the sensing error); reward, termination and info the true one.
     terminate_on_collision, collision_penalty, restitution: what a collision does.
     max_tracking_error: distance from the reference (m) that ends the episode.
     reward_weights: overrides of :data:`DEFAULT_REWARD_WEIGHTS` (finite numbers).

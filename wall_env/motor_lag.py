@@ -26,9 +26,12 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MAX_TIME_CONSTANT", "thrust_rate", "LagResponse", "held_command_response"]
+__all__ = ["MAX_TIME_CONSTANT", "MIN_LAG_STEPS", "thrust_rate", "LagResponse", "held_command_response"]
 
 MAX_TIME_CONSTANT = 1.0  # s, the longest motor lag a vehicle may be given
+# the simulator integrates the lag with RK4 at its physics step h, stable for h / tau_m below 2.78: a lag
+# shorter than one physics step is refused (0, no lag, is always allowed)
+MIN_LAG_STEPS = 1.0
 
 
 def thrust_rate(commanded: Any, produced: Any, time_constant: float) -> Any:
