@@ -50,7 +50,7 @@ import numpy as np
 import wall_env  # noqa: F401  (registers the environments)
 from wall_env.vehicle import GRAVITY
 
-__all__ = ["evaluate", "EvaluationResult", "EpisodeRecord", "solve_time_stats"]
+__all__ = ["evaluate", "evaluate_batched", "EvaluationResult", "EpisodeRecord", "solve_time_stats"]
 
 
 def solve_time_stats(seconds: Sequence[float]) -> dict[str, float]:
@@ -211,6 +211,71 @@ def evaluate(
     finally:
         environment.close()
     return EvaluationResult(_policy_name(policy), env_id, env_kwargs, seeds, episodes)
+
+
+def evaluate_batched(
+    policy: Any,
+    env_id: str,
+    seeds: Sequence[int],
+    env_kwargs: dict[str, Any] | None = None,
+    *,
+    deterministic: bool = True,
+    reset_options: dict[str, Any] | None = None,
+) -> EvaluationResult:
+    """:func:`evaluate` with every seed a row of one batched env (``gym.make_vec(env_id, num_envs=len(seeds),
+    vectorization_mode="vector_entry_point")``) and the policy answering the whole batch at each step.
+
+    Row ``k`` seeded with ``seeds[k]`` flies exactly as the single env does (:mod:`wall_env.vector_env`),
+    so the records equal :func:`evaluate`'s for a policy whose rows do not depend on each other (the
+    controllers of this package, SB3 policies); only ``solve_times`` are not split per episode. ``policy``:
+    anything with ``predict``, or a factory ``policy(envs)`` called with the vector env.
+    """
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("seeds must name at least one seed")
+    envs = gym.make_vec(env_id, num_envs=len(seeds), vectorization_mode="vector_entry_point", **dict(env_kwargs or {}))
+    try:
+        if not hasattr(policy, "predict"):
+            if not callable(policy):
+                raise ValueError("policy must have a predict() method or be a factory policy(envs)")
+            policy = policy(envs)
+        base: Any = envs.unwrapped
+        mapping = base.action_mapping
+        n = len(seeds)
+        observation, _ = envs.reset(seed=seeds, options=reset_options)  # type: ignore[arg-type]  # one seed a row
+        scenes = [base.scene_and_reference(k)[0] for k in range(n)]
+        rows: dict[str, list] = {k: [] for k in ("time", "p_world", "p_ref", "collision", "wall_clearance", "action")}
+        steps = np.zeros(n, dtype=np.int64)
+        running = np.ones(n, dtype=bool)
+        terminated_early = np.zeros(n, dtype=bool)
+        state, episode_start = None, np.ones(n, dtype=bool)
+        while running.any():
+            action, state = policy.predict(observation, state=state, episode_start=episode_start,
+                                           deterministic=deterministic)
+            action = np.asarray(action, dtype=float).reshape(n, 4)
+            episode_start = np.zeros(n, dtype=bool)
+            observation, _, terminated, truncated, info = envs.step(action)
+            for key in ("time", "p_world", "p_ref", "wall_clearance"):
+                rows[key].append(np.array(info[key], dtype=float))
+            rows["collision"].append(np.array(info["collision"], dtype=bool))
+            rows["action"].append(np.clip(action, -1.0, 1.0))
+            steps += running
+            terminated_early |= running & terminated
+            running &= ~(terminated | truncated)
+    finally:
+        envs.close()
+    stacked = {key: np.stack(value, axis=1) for key, value in rows.items()}  # (n, steps, ...)
+    episodes = []
+    for k, seed in enumerate(seeds):
+        length = int(steps[k])
+        p_ref = stacked["p_ref"][k, :length]
+        action = stacked["action"][k, :length]
+        episodes.append(EpisodeRecord(
+            seed=seed, time=stacked["time"][k, :length], p_world=stacked["p_world"][k, :length], p_ref=p_ref,
+            wall_normal=_wall_normals(scenes[k], p_ref), collision=stacked["collision"][k, :length],
+            wall_clearance=stacked["wall_clearance"][k, :length], action=action, command=mapping.to_physical(action),
+            hover_thrust=float(base.vehicle.mass * GRAVITY), terminated=bool(terminated_early[k])))
+    return EvaluationResult(_policy_name(policy), env_id, dict(env_kwargs or {}), seeds, episodes)
 
 
 def _fly(policy, env, seed, deterministic, reset_options, mapping, hover_thrust) -> EpisodeRecord:

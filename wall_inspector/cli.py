@@ -27,6 +27,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench-env": ("wall_env.benchmark", "measure environment steps per second and reset time"),
     "bench-mpc": ("controllers.benchmark", "time SC-MPC solves in closed loop against IPOPT on the same problems"),
     "compare": ("wall_inspector.compare", "reproduce the paper's Tables I and II with PID, MPC and SC-MPC (tables, JSON, plots)"),
+    "robustness": ("wall_inspector.robustness", "fly every method, told only the nominal model, over a grid of true worlds "
+                                                "(suction, pushes, gusts, latency, sensing, motor lag)"),
     "bench-ray": ("wall_inspector.bench_ray", "measure compare --ray: speed-up with 2 CPUs over 1, Ray's overhead per flight"),
     "tune": ("wall_inspector.tune", "tune a controller's gains or weights on a task within a budget (Optuna), write a preset"),
     "train": ("wall_inspector.train", "train a PPO agent on a wall task (checkpoints, TensorBoard, model card; --ray: many runs)"),

@@ -186,6 +186,12 @@ class MPCProblem:
             self.model.theta(), scene.to_vector(),
         ])
 
+    @property
+    def theta_slice(self) -> slice:
+        """Where the model's parameters ``theta`` sit in the global parameter vector."""
+        start = 2 + RESIDUAL_SIZE + 8
+        return slice(start, start + self.model.param_size)
+
     def stage_params(self, p_ref: np.ndarray, v_ref: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
         """Stage parameters ``(17, N)`` for references of ``x_1 .. x_N`` (``(N, 3)``, ``(N, 3)``, ``(N, 3, 3)``)."""
         N = self.horizon

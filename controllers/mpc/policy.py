@@ -52,6 +52,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from controllers.adaptation import ESTIMATED, RESIDUAL_EFFECT, AdaptationSettings, OnlineSuctionEstimator
 from controllers.env_description import EnvDescription
 from controllers.mpc.cost import InputLimits, MPCProblem, MPCWeights
 from controllers.mpc.lm import LevenbergMarquardt, LMInfo, LMResult, LMSettings
@@ -282,23 +283,79 @@ class SCMPC(MPC):
     """Suction-compensated MPC: :class:`MPC` whose model adds the wall suction (paper Eq. 9-10).
 
     ``compensation``: ``"dynamics+attitude"`` (default) or ``"dynamics"`` (the paper's form);
-    see the module docstring. Other arguments as :class:`MPC`.
+    see the module docstring. ``adapt``: learn the wall in flight (``True``, or
+    :class:`~controllers.adaptation.AdaptationSettings` or a dict of them): the model's
+    ``k_s``, ``d_thr`` and a residual force (a ``constant_force`` added to the model) are
+    re-estimated at every control step from the flight (:mod:`controllers.adaptation`) and the
+    next solve predicts with the estimate; :attr:`estimate_history` keeps each step's
+    estimates ``(n, 5)`` and :attr:`estimates` the latest. Other arguments as :class:`MPC`.
     """
 
     name = "SC-MPC"
 
     def __init__(self, description: EnvDescription, model: AeroModel | None = None, *,
-                 compensation: str = "dynamics+attitude", **kwargs: Any):
+                 compensation: str = "dynamics+attitude", adapt: Any = False, **kwargs: Any):
         if compensation not in COMPENSATION_MODES:
             raise ValueError(f"compensation must be one of {list(COMPENSATION_MODES)}, got {compensation!r}")
         if "attitude_model" in kwargs:
             raise ValueError("SCMPC sets attitude_model from compensation; do not pass both")
         self.compensation = compensation
         model = model if model is not None else description.nominal_model
+        settings = None if adapt is False or adapt is None else AdaptationSettings.from_spec(adapt)
+        if settings is not None and model.get(RESIDUAL_EFFECT) is None:
+            model = model.with_effect(make_effect(RESIDUAL_EFFECT))  # the residual force, from zero
         attitude_model = model.without("wall_suction") if compensation == "dynamics" else None
         super().__init__(description, model, attitude_model=attitude_model, **kwargs)
         if compensation == "dynamics":
             self.name = "SC-MPC (dynamics only)"
+        self.adaptation: OnlineSuctionEstimator | None = None
+        self.estimate_history: list[np.ndarray] = []
+        if settings is not None:
+            self.adaptation = OnlineSuctionEstimator(self.model, self.model_vehicle, description.scene,
+                                                     self.control_dt, settings)
+            self.name += " adaptive"
+            self._last_thrust = np.zeros(0)
+            labels = self.attitude_model.param_labels()
+            self._attitude_columns = [labels.index(label) for label in self.model.param_labels() if label in labels]
+            model_labels = self.model.param_labels()
+            self._attitude_sources = [model_labels.index(label) for label in self.model.param_labels() if label in labels]
+
+    @property
+    def estimates(self) -> dict[str, np.ndarray]:
+        """The latest estimate of each batch row, by name (:data:`~controllers.adaptation.ESTIMATED`)."""
+        if self.adaptation is None:
+            raise AttributeError("estimates exist with adapt=True")
+        return {name: self.adaptation.theta[:, i].copy() for i, name in enumerate(ESTIMATED)}
+
+    def clear_statistics(self) -> None:
+        super().clear_statistics()
+        self.estimate_history.clear()
+
+    def _commands(self, batch: np.ndarray) -> np.ndarray:
+        estimator = self.adaptation
+        if estimator is None:
+            return super()._commands(batch)
+        n = len(batch)
+        if estimator.n != n:
+            estimator.resize(n)
+            self._last_thrust = np.full(n, np.nan)
+        fresh = np.array([memory["fresh"] for memory in self._memory], dtype=bool)
+        if fresh.any():
+            estimator.start(fresh)
+            self._last_thrust[fresh] = np.nan
+        scenes = np.stack([memory["scene"].to_vector() for memory in self._memory])
+        estimator.update(batch, self._last_thrust, self.model_vehicle.mass, scenes)
+        theta = estimator.model_theta(self.model.theta())
+        inputs = self.step.inputs
+        inputs[StepInput.global_params][:, self.problem.theta_slice] = theta
+        attitude_theta = inputs[StepInput.attitude_global][:, self.attitude_problem.theta_slice]
+        attitude_theta[:, self._attitude_columns] = theta[:, self._attitude_sources]
+        inputs[StepInput.attitude_global][:, self.attitude_problem.theta_slice] = attitude_theta
+        commands = super()._commands(batch)
+        # what the env flies: the command through the action mapping's limits
+        self._last_thrust = self.action_mapping.to_physical(self.action_mapping.to_normalised(commands))[:, 0]
+        self.estimate_history.append(estimator.theta.copy())
+        return commands
 
     @classmethod
     def from_env(cls, env: Any, *, k_s: float | None = None, d_thr: float | None = None,
