@@ -91,7 +91,9 @@ def _checked(args: argparse.Namespace) -> tuple[list[int], list[World], int]:
         if not args.no_ppo:
             from agents.policy import _resolve
 
-            _resolve(args.ppo)  # a missing agent is a usage error, before any flight
+            folder = _resolve(args.ppo)  # a task name without a shipped agent raises here
+            if not (folder / "model.zip").is_file():
+                raise ValueError(f"--ppo {args.ppo}: no agent there ({folder / 'model.zip'} does not exist)")
     except (ValueError, FileNotFoundError) as exc:
         raise SystemExit(str(exc)) from None
     return seeds, [w for w in DEFAULT_GRID if w.group in chosen], workers
