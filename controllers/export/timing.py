@@ -67,6 +67,7 @@ class NativeTiming:
     commands: np.ndarray  # (n, 4)
     actions: np.ndarray  # (n, 4)
     iterations: np.ndarray  # (n,) LM iterations
+    cold: np.ndarray  # (n,) bool: the step started cold (episode start, time gone back, after a failure)
 
 
 def record_flight(policy: MPC, env: Any, seed: int) -> RecordedFlight:
@@ -133,10 +134,10 @@ def time_native_steps(folder: str | Path, flight: RecordedFlight, passes: int = 
             raise RuntimeError(f"{program} failed: {done.stderr.strip()}")
         data = np.frombuffer(results.read_bytes(), dtype="<f8")
     n, passes_run = int(data[0]), int(data[1])
-    outputs = data[2:2 + 10 * n].reshape(n, 10)
-    times = data[2 + 10 * n:].reshape(2, passes_run * n)
+    outputs = data[2:2 + 11 * n].reshape(n, 11)
+    times = data[2 + 11 * n:].reshape(2, passes_run * n)
     return NativeTiming(times[0].copy(), times[1].copy(), passes_run, outputs[:, 0].astype(int),
-                        outputs[:, 1:5].copy(), outputs[:, 5:9].copy(), outputs[:, 9].astype(int))
+                        outputs[:, 1:5].copy(), outputs[:, 5:9].copy(), outputs[:, 9].astype(int), outputs[:, 10] != 0)
 
 
 def measure_exported_controller(folder: str | Path, method: str = "scmpc", seed: int = 0, passes: int = 5,

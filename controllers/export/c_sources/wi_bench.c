@@ -8,7 +8,7 @@
  * untimed (to warm the caches) and then PASSES times (default 5), each wi_step call timed
  * alone with the monotonic clock (wall) and the thread's CPU clock (which other processes
  * taking the core cannot inflate). RESULTS: [count, PASSES], per step of the last pass
- * [status, command (4), action (4), LM iterations], then every timed call's wall seconds
+ * [status, command (4), action (4), LM iterations, cold start (0/1)], then every timed call's wall seconds
  * (PASSES x count), then its CPU seconds (PASSES x count).
  */
 #define _POSIX_C_SOURCE 199309L
@@ -22,7 +22,7 @@
 #define PARAMETER_SIZE ((long)(sizeof(wi_parameters) / sizeof(double)))
 #define RECORD_SIZE (1 + WI_OBSERVATION_SIZE + WI_SAMPLES_SIZE + PARAMETER_SIZE)
 
-#define OUTPUT_SIZE 10
+#define OUTPUT_SIZE 11
 
 static double now(clockid_t clock) {
   struct timespec t;
@@ -79,6 +79,7 @@ int main(int argc, char **argv) {
         memcpy(out + 1, command, sizeof command);
         memcpy(out + 5, action, sizeof action);
         out[9] = memory.info[2];
+        out[10] = memory.status[2];
       }
     }
   }
