@@ -199,3 +199,18 @@ def test_the_hand_written_c_is_warning_free_c99(scmpc):
                                "-o", "/dev/null"], cwd=folder, capture_output=True, text=True)
         assert done.returncode == 0, done.stderr
     assert (C_SOURCES / "wi_controller.h").read_text() == (folder / "wi_controller.h").read_text()
+
+
+def test_the_export_command_writes_the_c_folder_it_announces(tmp_path, capsys):
+    from wall_inspector.cli import main
+
+    folder = tmp_path / "c"
+    assert main(["export", "scmpc", "--k-s", "3.0", "--d-thr", "0.12", "--out", str(folder), "--no-build"]) == 0
+    out = capsys.readouterr().out
+    assert f"wrote {folder}: SC-MPC for {SCENARIO.env_id} as C" in out and f"make -C {folder}" in out
+    for name in ("wi_casadi.c", "wi_casadi.h", "wi_controller.c", "wi_controller.h", "wi_config.h", "wi_defaults.c",
+                 "wi_bench.c", "Makefile", "export.json"):
+        assert (folder / name).is_file(), name
+    values = json.loads((folder / "export.json").read_text())["parameters"]["wi_parameters"]
+    assert values["global.wall_suction.k_s"] == 3.0 and values["global.wall_suction.d_thr"] == 0.12
+    assert not (folder / "libwi_controller.so").exists()  # --no-build
