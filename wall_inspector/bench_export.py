@@ -18,7 +18,8 @@ Targets (printed with the figures): the C step's median <= 0.1 ms and p99.8 <= 0
 ONNX step's median <= 0.05 ms (wall clock). The process is pinned to one CPU core
 (``--no-pin`` leaves it free); ``--high-priority`` runs the C timing loop with real-time FIFO
 scheduling where permitted, as a flight computer runs its control thread. The load average
-is printed beside the figures; ``--json FILE`` writes them all.
+is printed beside the figures; ``--json FILE`` writes them all, ``--markdown FILE`` a table for the
+README (``wall-inspector readme --set bench-export=FILE``).
 """
 
 from __future__ import annotations
@@ -42,6 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--passes", type=int, default=5, help="timed passes of the C loop over the flight (default 5)")
     parser.add_argument("--out", default="out/bench-export", help="folder for the exported files")
     parser.add_argument("--json", default=None, metavar="FILE", help="write every figure to FILE")
+    parser.add_argument("--markdown", default=None, metavar="FILE",
+                        help="write the figures as a Markdown table to FILE (for wall-inspector readme)")
     parser.add_argument("--no-pin", action="store_true", help="do not pin the process to one CPU core")
     parser.add_argument("--high-priority", action="store_true",
                         help="run the C timing loop with real-time FIFO scheduling (needs the permission)")
@@ -54,11 +57,11 @@ def _check(args: argparse.Namespace) -> Path:
         raise SystemExit(f"--seed must be non-negative, got {args.seed}")
     try:
         out = check_output_folder(args.out, "--out")
-        if args.json is not None:
-            json_path = Path(args.json)
-            if json_path.is_dir():
-                raise ValueError(f"--json {json_path}: is a folder")
-            check_output_folder(json_path.parent if str(json_path.parent) else ".", "--json")
+        for flag, value in (("--json", args.json), ("--markdown", args.markdown)):
+            if value is not None:
+                if Path(value).is_dir():
+                    raise ValueError(f"{flag} {value}: is a folder")
+                check_output_folder(Path(value).parent, flag)
     except ValueError as exc:
         raise SystemExit(str(exc)) from None
     if not args.no_onnx:
@@ -77,6 +80,30 @@ def _check(args: argparse.Namespace) -> Path:
 
 def _line(name: str, stats: dict[str, float]) -> str:
     return f"  {name:38s} {stats['median']:8.4f} {stats['p99_8']:8.4f} {stats['max']:8.4f}"
+
+
+def markdown(results: dict[str, Any]) -> str:
+    """The figures of :func:`run` as a Markdown table with a note of how they were measured."""
+    c, onnx = results["c_controller"], results.get("onnx_policy")
+    name = c["controller"]
+    rows = [(f"{name}, exported C: `wi_step` in a C timing loop (wall clock)", c["c_step_ms"]),
+            (f"{name}, exported C: `wi_step` in a C timing loop (CPU time)", c["c_step_cpu_ms"]),
+            (f"{name}, Python `predict` (wall clock)", c["python_predict_ms"])]
+    if onnx is not None:
+        rows += [("PPO, exported ONNX: one onnxruntime call (wall clock)", onnx["onnx_step_ms"]),
+                 ("PPO, Python `predict` (wall clock)", onnx["python_predict_ms"])]
+    lines = ["| step | median (ms) | p99 (ms) | p99.8 (ms) | max (ms) |", "|---|---:|---:|---:|---:|"]
+    lines += [f"| {label} | {s['median']:.3f} | {s['p99']:.3f} | {s['p99_8']:.3f} | {s['max']:.3f} |" for label, s in rows]
+    load = ", ".join(f"{x:.2f}" for x in results["load_average"])
+    note = (f"One flight of `{c['env']}` (k_s 4.1 N/m, d_thr 0.132 m, command noise, seed {c['seed']}), "
+            f"{c['steps']:,} control steps; the C loop runs them {c['passes']} times after one untimed pass, "
+            f"{c['lm_iterations_mean']:.2f} LM iterations per step. The C controller's actions equal the Python "
+            f"controller's (largest difference {c['max_action_difference']:.2g})")
+    if onnx is not None:
+        note += f", the ONNX policy's the Python agent's within {onnx['max_action_difference']:.2g}"
+    note += (f". {'Pinned to one core' if results['pinned_core'] is not None else 'Not pinned'}, "
+             f"{results['priority']}, load average {load} after the run; measured by `wall-inspector bench-export`.")
+    return "\n".join(lines) + "\n\n" + note + "\n"
 
 
 def _verdict(value: float, target: float) -> str:
@@ -131,5 +158,10 @@ def run(args: argparse.Namespace) -> int:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(results, indent=1) + "\n")
+        print(f"wrote {path}")
+    if args.markdown is not None:
+        path = Path(args.markdown)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(markdown(results))
         print(f"wrote {path}")
     return 0
