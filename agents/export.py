@@ -27,6 +27,7 @@ PID) action as an input, which an ONNX file does not hold.
 from __future__ import annotations
 
 import contextlib
+import importlib
 import json
 import logging
 import os
@@ -48,6 +49,14 @@ ONNX_FILE = "policy.onnx"
 TOLERANCE = 1e-5  # largest difference from the Python agent's action the export accepts
 TARGETS = {"median_ms": 0.05}  # of one onnxruntime call on one observation
 _RANDOM_CHECKS = 256
+
+
+def _require(module: str) -> Any:
+    """Import ``module`` of the ``export`` extra, or say how to install it."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise ImportError(f"exporting to ONNX needs {module}: pip install 'wall-inspector[export]'") from None
 
 
 def _load(source: str | Path | TrainedPolicy) -> TrainedPolicy:
@@ -152,9 +161,10 @@ def export_onnx(source: str | Path | TrainedPolicy, path: str | Path) -> Path:
     ``RuntimeError`` if the ONNX graph does not reproduce the Python agent's actions within :data:`TOLERANCE`
     (``path`` is then not written).
     """
-    import onnx
     import torch
 
+    onnx = _require("onnx")
+    _require("onnxscript")  # PyTorch's exporter imports it
     policy = _load(source)
     path = Path(path)
     if path.exists() and not path.is_file():
@@ -194,8 +204,7 @@ class OnnxPolicy:
     """
 
     def __init__(self, path: str | Path, threads: int = 1):
-        import onnxruntime
-
+        onnxruntime = _require("onnxruntime")
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{path} does not exist")

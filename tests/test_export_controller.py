@@ -214,3 +214,34 @@ def test_the_export_command_writes_the_c_folder_it_announces(tmp_path, capsys):
     values = json.loads((folder / "export.json").read_text())["parameters"]["wi_parameters"]
     assert values["global.wall_suction.k_s"] == 3.0 and values["global.wall_suction.d_thr"] == 0.12
     assert not (folder / "libwi_controller.so").exists()  # --no-build
+
+
+def test_bench_export_times_the_c_step_on_a_whole_flight_and_writes_its_figures(tmp_path, capsys):
+    from wall_inspector.cli import main
+
+    figures, table = tmp_path / "bench.json", tmp_path / "bench.md"
+    assert main(["bench-export", "--no-onnx", "--passes", "1", "--no-pin", "--out", str(tmp_path / "out"),
+                 "--json", str(figures), "--markdown", str(table)]) == 0
+    c = json.loads(figures.read_text())["c_controller"]
+    assert c["steps"] == 1700 and c["c_step_ms"]["count"] == 1700 and c["python_predict_ms"]["count"] == 1700
+    assert c["max_action_difference"] <= 1e-6 and c["c_failures"] == c["python_failures"] == 0
+    assert 0 < c["c_step_ms"]["median"] <= c["c_step_ms"]["p99_8"] <= c["c_step_ms"]["max"]
+    assert "exported C: `wi_step` in a C timing loop (wall clock)" in table.read_text()
+    assert "SC-MPC exported C, wi_step (wall)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--passes", "0"], "--passes must be a positive integer, got 0"),
+    (["--out", "{tmp}/a-file"], "--out {tmp}/a-file: exists and is not a folder"),
+    (["--agent", "{tmp}/no-agent"], "--agent {tmp}/no-agent: no such folder, and not a task name"),
+    (["--json", "{tmp}"], "--json {tmp}: is a folder"),
+    (["--method", "pid"], "argument --method: invalid choice: 'pid'"),
+])
+def test_bench_export_rejects_bad_input_in_one_line(args, message, tmp_path, capsys):
+    from wall_inspector.cli import main
+
+    (tmp_path / "a-file").write_text("mine")
+    assert main(["bench-export", *[a.format(tmp=tmp_path) for a in args]]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("wall-inspector bench-export: error: ")
+    assert message.format(tmp=tmp_path) in err

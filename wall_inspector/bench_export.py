@@ -65,7 +65,14 @@ def _check(args: argparse.Namespace) -> Path:
     except ValueError as exc:
         raise SystemExit(str(exc)) from None
     if not args.no_onnx:
+        import importlib.util
+
         import agents
+
+        missing = [name for name in ("onnx", "onnxscript", "onnxruntime") if importlib.util.find_spec(name) is None]
+        if missing:
+            raise SystemExit(f"the ONNX step needs {', '.join(missing)}: pip install 'wall-inspector[export]', "
+                             "or pass --no-onnx")
 
         if not Path(args.agent).exists():
             try:

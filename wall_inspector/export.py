@@ -42,6 +42,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-build", action="store_true", help="mpc, scmpc: write the C files, do not run make")
 
 
+def _apply(flags: list[str]) -> str:
+    return "only applies" if len(flags) == 1 else "only apply"
+
+
 def _check(args: argparse.Namespace) -> Path:
     """Every usage check before any work; ``SystemExit("message")`` (one line, exit 2) on the first failure."""
     from wall_env.tasks import task_env_id
@@ -56,14 +60,14 @@ def _check(args: argparse.Namespace) -> Path:
         given = [flag for flag, value in {**controller_flags, "--no-build": args.no_build or None}.items()
                  if value is not None]
         if given:
-            raise SystemExit(f"{', '.join(given)} only apply to scmpc or mpc, not to ppo")
+            raise SystemExit(f"{', '.join(given)} {_apply(given)} to scmpc or mpc, not to ppo")
         return out
     if args.agent is not None:
         raise SystemExit(f"--agent only applies to ppo, not to {args.method}")
     if args.method == "mpc":
         given = [flag for flag, value in controller_flags.items() if value is not None]
         if given:
-            raise SystemExit(f"{', '.join(given)} only apply to scmpc (mpc predicts with the nominal model)")
+            raise SystemExit(f"{', '.join(given)} {_apply(given)} to scmpc (mpc predicts with the nominal model)")
     if args.model is not None and not Path(args.model).is_file():
         raise SystemExit(f"--model {args.model}: no such file")
     return out
@@ -91,8 +95,8 @@ def _export_ppo(args: argparse.Namespace, out: Path) -> int:
     source = _agent_source(args)
     try:
         path = export_onnx(source, out / ONNX_FILE)
-    except (ValueError, CheckpointError, FileNotFoundError) as exc:
-        raise SystemExit(f"--agent {source}: {exc}") from None
+    except (ValueError, CheckpointError, FileNotFoundError, ImportError) as exc:  # each names the file or package
+        raise SystemExit(str(exc)) from None
     policy = OnnxPolicy(path)
     print(f"wrote {path}: the PPO agent of {source} ({policy.metadata.get('env_id')}), normalisation folded in; "
           f"observation ({policy.observation_size} floats) in, action (4 floats in [-1, 1]) out; its actions match "
