@@ -14,6 +14,7 @@ from __future__ import annotations
 import ctypes
 import shutil
 import subprocess
+import tempfile
 import warnings
 from pathlib import Path
 from typing import Any
@@ -53,6 +54,15 @@ def build(folder: str | Path) -> Path:
     return folder / LIBRARY
 
 
+def _load_private_copy(path: Path) -> ctypes.CDLL:
+    """Load a copy of the library under a fresh name: the dynamic loader hands out the library it already
+    loaded for a path, so a folder exported and built again in the same process would otherwise run old code."""
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp, path.name)
+        shutil.copyfile(path, copy)
+        return ctypes.CDLL(str(copy))  # the loaded library outlives its file
+
+
 class NativeController(ControllerPolicy):
     """An exported MPC or SC-MPC, built in ``folder``, flown through ``ctypes`` with SB3's ``predict``.
 
@@ -77,7 +87,7 @@ class NativeController(ControllerPolicy):
         path = Path(folder) / LIBRARY
         if not path.is_file():
             raise FileNotFoundError(f"{path} does not exist; build the folder first (controllers.export.build)")
-        self.library = ctypes.CDLL(str(path.resolve()))
+        self.library = _load_private_copy(path)
         sizes = (ctypes.c_longlong * 8)()
         self.library.wi_sizes(sizes)
         parameters = default_parameters(policy)
