@@ -16,7 +16,7 @@ $(BIN)/python:
 # an unpinned torch would pull a multi-GB CUDA build.
 $(VENV)/.installed: pyproject.toml $(BIN)/python
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e ".[notebooks,test,ray]"
+	$(BIN)/python -m pip install --quiet -e ".[notebooks,test,ray,export]"
 	touch $@
 
 install: $(VENV)/.installed

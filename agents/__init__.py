@@ -12,7 +12,8 @@ Modules: :mod:`agents.config` (per-task YAML in ``agents/configs/``),
 (several environments per worker process), :mod:`agents.residual` (corrections on
 top of PID / SC-MPC), :mod:`agents.demonstrations` and :mod:`agents.behaviour_cloning` (a controller's
 flight recorded and cloned into PPO before training: ``--warm-start``), :mod:`agents.callbacks`, :mod:`agents.checkpoints` (files,
-model cards), :mod:`agents.evaluate`, :mod:`agents.policy`, :mod:`agents.train`.
+model cards), :mod:`agents.evaluate`, :mod:`agents.policy`, :mod:`agents.train`,
+:mod:`agents.export` (an agent as one ONNX file for onnxruntime).
 Importing this package does not import PyTorch; loading a policy does.
 """
 

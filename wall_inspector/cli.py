@@ -38,6 +38,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fly": ("discovery.fly", "record a flight log (CSV + JSON) from the simulator with measurement noise"),
     "bench-discover": ("discovery.benchmark", "time discovery on a 60 s, 100 Hz log; --acceptance: its accuracy on hidden-effect logs"),
     "discover": ("discovery.cli", "find, name and fit what the nominal model misses in flight logs; write a model file"),
+    "export": ("wall_inspector.export", "write a PPO agent as ONNX, or MPC / SC-MPC as C, to fly without this package"),
+    "bench-export": ("wall_inspector.bench_export", "time the exported C controller's step (C timing loop) and the ONNX "
+                                                    "policy's step on the Table II flight, beside Python's predict"),
 }
 
 
