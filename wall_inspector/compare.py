@@ -28,6 +28,13 @@ PPO's training) stands beside the results.
 
 ``--ray [ADDRESS]`` flies every (method, scenario, seed) flight as a Ray task
 (:mod:`wall_inspector.ray_backend`): on an embedded Ray of this machine, or on a cluster.
+
+Nothing is lost on Ctrl-C: without ``--ray`` each finished flight is saved into
+``OUT/.flights/`` as it lands, and the same command run again flies only the flights that
+are missing (the tables are the same, byte for byte, as an uninterrupted run's); the folder
+is emptied of them when the run completes. A folder holding the unfinished flights of a run
+with other settings is refused. The run holds the folder's lock
+(:mod:`wall_env.run_lock`): a second run into it refuses, naming the first.
 """
 
 from __future__ import annotations
@@ -86,6 +93,94 @@ def _sigma_changes(items: list[str]) -> dict[str, Any]:
     except ValueError as exc:
         raise UsageError(f"--mpc-sigma: {exc}") from None
     return changes
+
+
+FLIGHT_CACHE = ".flights"
+
+
+class FinishedFlights:
+    """The flights of one run saved as they land (``OUT/.flights/<key>.npz``), for a rerun to skip.
+
+    ``signature`` (the run's settings) is written beside them; flights of a run with another
+    signature are refused rather than mixed in.
+    """
+
+    def __init__(self, out: Any, signature: dict[str, Any]):
+        from pathlib import Path
+
+        self.folder = Path(out) / FLIGHT_CACHE
+        self.signature = json.dumps(signature, sort_keys=True)
+        stored = self.folder / "settings.json"
+        if stored.is_file() and stored.read_text() != self.signature:
+            raise UsageError(f"--out {out} holds the unfinished flights of a compare run with other settings "
+                             f"({stored}); run that command again to finish it, or choose another --out")
+
+    @staticmethod
+    def key(flight: Any) -> str:
+        """A file name for one flight of the tables (scenario, policy, seed)."""
+        import hashlib
+
+        text = json.dumps([flight.scenario.name, flight.scenario.env_id, flight.policy, int(flight.seed)])
+        return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+    def load(self, key: str) -> Any:
+        from controllers.evaluation import EpisodeRecord
+
+        path = self.folder / f"{key}.npz"
+        if not path.is_file():
+            return None
+        try:
+            with np_load(path) as data:
+                fields = {k: data[k] for k in data.files}
+        except (OSError, ValueError):  # a flight cut off while it was being saved: fly it again
+            return None
+        scalars = {"seed": int(fields.pop("seed")), "hover_thrust": float(fields.pop("hover_thrust")),
+                   "terminated": bool(fields.pop("terminated")), "solve_times": fields.pop("solve_times").tolist()}
+        return EpisodeRecord(**scalars, **fields)
+
+    def save(self, key: str, record: Any) -> None:
+        import dataclasses
+        import os
+
+        import numpy as np
+
+        self.folder.mkdir(parents=True, exist_ok=True)
+        (self.folder / "settings.json").write_text(self.signature)
+        values = {f.name: np.asarray(getattr(record, f.name)) for f in dataclasses.fields(record)}
+        temporary = self.folder / f".{key}.tmp.npz"
+        np.savez(temporary, **values)  # type: ignore[arg-type]  # keyword arrays
+        os.replace(temporary, self.folder / f"{key}.npz")  # whole or not at all
+
+    def clear(self) -> None:
+        import shutil
+
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def np_load(path: Any) -> Any:
+    import numpy as np
+
+    return np.load(path, allow_pickle=False)
+
+
+def resuming_executor(finished: FinishedFlights):
+    """A :data:`controllers.paper_tables.FlightExecutor` that flies in this process, saving each flight as it
+    lands and taking the ones a previous, interrupted run saved."""
+    from controllers.paper_tables import fly
+
+    def run(flights, on_flight):
+        records = []
+        for flight in flights:
+            key = finished.key(flight)
+            record = finished.load(key)
+            if record is None:
+                record = fly(flight)
+                finished.save(key, record)
+            records.append(record)
+            on_flight()
+        return records
+
+    return run
 
 
 def _preset_note(preset: str, changes: dict[str, Any]) -> str:
@@ -218,8 +313,22 @@ def run(args: argparse.Namespace) -> int:
         from wall_inspector import ray_backend
 
         ray_backend.check_arguments(args)
+        from wall_env.run_lock import lock_run_folder
+
+        lock = lock_run_folder(out, "wall-inspector compare")
+        signature = {k: v for k, v in sorted(vars(args).items()) if k not in ("out", "no_progress", "ray", "ray_cpus")}
+        finished = FinishedFlights(out, signature)
     except (UsageError, ValueError) as exc:
         raise SystemExit(str(exc)) from None  # one line, exit status 2 (wall_inspector.cli)
+    try:
+        return _run(args, scenarios, tasks, changes, out, finished)
+    finally:
+        lock.release()
+
+
+def _run(args: argparse.Namespace, scenarios: list, tasks: list[str], changes: dict[str, Any], out: Any,
+         finished: FinishedFlights) -> int:
+    from controllers import paper_tables as pt
 
     mpc_weights = (lambda w: dataclasses.replace(w, **changes)) if changes else None
     policies = pt.controller_policies(args.weights, mpc_weights=mpc_weights)
@@ -231,7 +340,7 @@ def run(args: argparse.Namespace) -> int:
         policies.update(authors)
     note = _preset_note(args.weights, changes)
     with contextlib.ExitStack() as stack:
-        executor = None
+        executor: Any = resuming_executor(finished)
         if args.ray is not None:
             from wall_inspector import ray_backend
 
@@ -258,9 +367,10 @@ def run(args: argparse.Namespace) -> int:
     flights = sum(len(r.evaluation.episodes) for r in results)
     timing["flights"] = {"count": flights, "wall_time_s": round(flying_s, 3),
                          "executor": "in this process" if args.ray is None else f"Ray ({args.ray})"}
-    if executor is not None:  # each flight's seconds on its worker, in the order of the tables
+    if args.ray is not None:  # each flight's seconds on its worker, in the order of the tables
         timing["flights"]["seconds_each"] = [round(s, 3) for s in executor.seconds]
     paths["timing"].write_text(json.dumps(timing, indent=2))
+    finished.clear()
     print(paths["markdown"].read_text())
     print(f"{len(results)} runs ({flights} flights) in {flying_s:.0f} s; wrote " + ", ".join(str(p) for p in paths.values()))
     return 0

@@ -121,6 +121,13 @@ def _ray_executor(address: str, cpus: int | None):
 
 def run(args: argparse.Namespace) -> int:
     seeds, worlds, workers = _checked(args)
+    from wall_env.run_lock import lock_run_folder
+
+    with lock_run_folder(args.out, "wall-inspector robustness"):
+        return _run(args, seeds, worlds, workers)
+
+
+def _run(args: argparse.Namespace, seeds: list[int], worlds: list[World], workers: int) -> int:
     from controllers.robustness import authors_methods, default_methods, local_executor, run_grid, write_outputs
 
     methods: dict[str, Method] = default_methods()

@@ -25,6 +25,7 @@ import shlex
 import shutil
 import sys
 from pathlib import Path
+from typing import Any
 
 _DEFAULT_TRAIN_SEEDS = "1000-1002"
 _DEFAULT_HELDOUT_SEEDS = "2000-2009"
@@ -110,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
     import wall_env  # noqa: F401  (registers the environments)
-    from controllers.presets import PRESET_DIR, load_preset, tuned_preset_path
+    from controllers.presets import load_preset
     from controllers.tuning import SearchSpace, Tuner, default_objective
     from wall_env.tasks import task_env_id, task_slug
     from wall_env.validation import check_output_folder
@@ -131,7 +132,11 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--budget-trials must be in [1, 100000], got {args.budget_trials}")
         if not 0 <= args.budget_minutes <= 100000:
             raise ValueError(f"--budget-minutes must be in [0, 100000] (0 for no limit), got {args.budget_minutes}")
-        steps = [int(n) for n in args.horizon_steps.split(",") if n.strip()] if args.horizon_steps else []
+        try:
+            steps = [int(n) for n in args.horizon_steps.split(",") if n.strip()] if args.horizon_steps else []
+        except ValueError:
+            raise ValueError(f"--horizon-steps takes whole numbers of steps separated by commas, e.g. 15,20,30; "
+                             f"got {args.horizon_steps!r}") from None
         if method == "pid" and (steps or args.fixed_dt):
             raise ValueError("--horizon-steps and --fixed-dt apply to the MPCs, not to pid")
         env_kwargs = _env_kwargs(args.set)
@@ -158,6 +163,24 @@ def run(args: argparse.Namespace) -> int:
     tuner = Tuner(objective, heldout, out, budget_trials=args.budget_trials,
                   budget_minutes=args.budget_minutes or None, seed=args.sampler_seed, space=space, command=command,
                   progress=not args.no_progress, start=args.start)
+    from wall_env.run_lock import lock_run_folder
+
+    lock = lock_run_folder(out, "wall-inspector tune")  # a second run into the folder refuses, naming this one
+    try:
+        tuner.open_study()  # a folder holding another method's or objective's study is refused here
+    except ValueError as exc:
+        lock.release()
+        raise SystemExit(str(exc)) from None
+    try:
+        return _tune(args, tuner, out, env_id, method, heldout, ray_backend)
+    finally:
+        lock.release()
+
+
+def _tune(args: argparse.Namespace, tuner: Any, out: Path, env_id: str, method: str, heldout: list[int],
+          ray_backend: Any) -> int:
+    from controllers.presets import PRESET_DIR, tuned_preset_path
+
     try:
         if args.ray is None:
             result = tuner.run()
