@@ -448,3 +448,14 @@ def test_problem_weights_are_inverse_squared_sigmas(sc_problem):
     np.testing.assert_allclose(g[31:35], low)
     np.testing.assert_allclose(low, [6.0, -3, -3, -3])
     np.testing.assert_allclose(high, [26.0, 3, 3, 3])
+
+
+def test_an_observation_time_far_past_the_reference_gives_a_finite_command():
+    """A clock of 1e19 s overflowed the reference table's index (IndexError); past the end the reference holds."""
+    env = gym.make("WallInspector/WallSweep-v0")
+    obs, _ = env.reset(seed=0)
+    policy = SCMPC.from_env(env)
+    late = obs.copy()
+    late[47] = 1e19
+    action, _ = policy.predict(late, episode_start=True)
+    assert action.shape == (4,) and np.all(np.isfinite(action)) and policy.failures == 0

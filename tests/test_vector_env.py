@@ -295,3 +295,13 @@ def test_a_stream_of_one_draws_its_step_noise_from_a_block_that_equals_drawing_e
     batch.seed([0, 1, 2], [3, 4, 5])
     batch.step_normals(4, active=np.array([True, False, True]))
     assert batch.counters.tolist() == [4, 0, 4]
+
+
+def test_a_non_finite_action_row_is_named_in_a_short_message():
+    envs = gym.make_vec("WallInspector/WallSweep-v0", num_envs=1024, vectorization_mode="vector_entry_point")
+    envs.reset(seed=0)
+    actions = np.zeros((1024, 4))
+    actions[517, 2] = np.nan
+    with pytest.raises(ValueError) as error:
+        envs.step(actions)
+    assert "1 of 1024 rows are not (row 517: [0.0, 0.0, nan, 0.0])" in str(error.value) and len(str(error.value)) < 200

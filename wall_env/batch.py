@@ -59,8 +59,13 @@ def check_actions(actions: Any, n: int | None) -> np.ndarray:
     if array.shape != shape:
         raise ValueError(f"action must have shape {shape} (thrust, wx, wy, wz in [-1, 1]), got shape {array.shape}")
     array = array.astype(np.float64)
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"action must be finite, got {array.tolist()}")
+    finite = np.isfinite(array)
+    if not finite.all():
+        if n is None:
+            raise ValueError(f"action must be finite, got {array.tolist()}")
+        rows = np.flatnonzero(~finite.all(axis=1))
+        listed = ", ".join(f"row {r}: {array[r].tolist()}" for r in rows[:3]) + (" ..." if len(rows) > 3 else "")
+        raise ValueError(f"action must be finite; {len(rows)} of {n} rows are not ({listed})")
     return array
 
 

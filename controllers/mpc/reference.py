@@ -160,8 +160,9 @@ class HorizonSampler:
                 p, v, a = reference.sample((t_off[:, None] + self.steps).ravel())
                 view[off] = np.concatenate([p, v, a], axis=1).reshape(-1, width, 9)
                 rows, grid = indices[on_grid], grid[on_grid]
-            view[rows] = table[np.minimum(np.maximum(grid, 0.0).astype(np.int64)[:, None] + self._offsets,
-                                          len(table) - 1)]
+            # clamped before the cast: a time far past the end (1e19 s) would overflow int64
+            start = np.minimum(np.maximum(grid, 0.0), len(table) - 1).astype(np.int64)
+            view[rows] = table[np.minimum(start[:, None] + self._offsets, len(table) - 1)]
         return result
 
 
