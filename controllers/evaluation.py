@@ -48,6 +48,7 @@ import gymnasium as gym
 import numpy as np
 
 import wall_env  # noqa: F401  (registers the environments)
+from wall_env import interrupts
 from wall_env.vehicle import GRAVITY
 
 __all__ = ["evaluate", "evaluate_batched", "EvaluationResult", "EpisodeRecord", "solve_time_stats"]
@@ -250,6 +251,7 @@ def evaluate_batched(
         terminated_early = np.zeros(n, dtype=bool)
         state, episode_start = None, np.ones(n, dtype=bool)
         while running.any():
+            interrupts.check()
             action, state = policy.predict(observation, state=state, episode_start=episode_start,
                                            deterministic=deterministic)
             action = np.asarray(action, dtype=float).reshape(n, 4)
@@ -287,6 +289,7 @@ def _fly(policy, env, seed, deterministic, reset_options, mapping, hover_thrust)
     state, episode_start = None, True
     terminated = truncated = False
     while not (terminated or truncated):
+        interrupts.check()
         action, state = policy.predict(observation, state=state, episode_start=np.array([episode_start]),
                                        deterministic=deterministic)
         action = np.asarray(action, dtype=float).reshape(4)

@@ -257,7 +257,9 @@ def test_many_create_close_cycles_leak_no_pybullet_clients():
     ids = []
     # more than PyBullet's limit of simultaneously connected clients (1024)
     for _ in range(1100):
-        env = gym.make("WallInspector/WallHover-v0")
+        env = gym.make("WallInspector/WallHover-v0", render_mode="rgb_array", render_size=(16, 16))
+        env.reset(seed=0)
+        env.render()  # PyBullet's world is made at the first picture
         ids.append(env.unwrapped._world.client_id)
         env.close()
     assert not any(pybullet.getConnectionInfo(physicsClientId=i)["isConnected"] for i in set(ids))

@@ -143,7 +143,10 @@ class WallInspectorEnv(gym.Env):
         self.episode_parameters: dict[str, float] = {}
 
         self._batch = EnvBatch(config, 1)
-        self._world = BulletWorld(config.vehicle, self.scene, gui=self.render_mode == "human")
+        # PyBullet holds the picture only: its world is made at the first render (at once for the human
+        # viewer's window), so flights without pictures never start it
+        if self.render_mode == "human":
+            self._world = BulletWorld(config.vehicle, self.scene, gui=True)
         self._phase = "new"
         self._warned_length = False
 
@@ -201,8 +204,10 @@ class WallInspectorEnv(gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to gym.make")
             return None
-        if self._world is None:
+        if self._phase == "closed":
             raise RuntimeError("render() after close(): this environment is closed")
+        if self._world is None:
+            self._world = BulletWorld(self.vehicle, self.scene, gui=self.render_mode == "human")
         if not self._world._markers:
             self._world.show_reference(self.reference.position(np.linspace(0, self.duration, 60)))
         x = self._batch.simulator.x[0]

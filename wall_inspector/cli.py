@@ -84,11 +84,14 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     name = argv[0]
     module_name, help_text = COMMANDS[name]
-    module = importlib.import_module(module_name)
     prog = f"wall-inspector {name}"
-    parser = OneLineParser(prog=prog, description=help_text)
-    module.add_arguments(parser)
+    from wall_env import interrupts
+
+    interrupts.install()  # a Ctrl-C that native code swallows is still seen by the long loops
     try:
+        module = importlib.import_module(module_name)  # Ctrl-C while importing is a Ctrl-C too
+        parser = OneLineParser(prog=prog, description=help_text)
+        module.add_arguments(parser)
         args = parser.parse_args(argv[1:])
         return int(module.run(args) or 0)
     except SystemExit as exit_:
