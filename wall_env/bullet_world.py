@@ -180,25 +180,25 @@ class BulletWorld:
         for marker, point in zip(self._markers, points_world):
             bc.resetBasePositionAndOrientation(marker, list(point), [0, 0, 0, 1])
 
-    def camera_eye(self, target: np.ndarray) -> np.ndarray:
+    def camera_eye(self, target: np.ndarray, distance: float = 1.0) -> np.ndarray:
         """A viewpoint in free space: beside and in front of a single wall, or behind the
-        vehicle looking along a corridor (walls whose normals cancel)."""
+        vehicle looking along a corridor (walls whose normals cancel); ``distance`` scales how far."""
         up = np.array([0.0, 0.0, 1.0])
         normals = [np.asarray(w.normal) for w in self.scene.walls]
         if not normals:
-            return target + np.array([-1.2, -1.2, 0.5])
+            return target + distance * np.array([-1.2, -1.2, 0.5])
         total = np.sum(normals, axis=0)
         if np.linalg.norm(total) > 0.5:
             n = total / np.linalg.norm(total)
             along = np.cross(up, n)
-            return target + 0.6 * n + 1.1 * along + 0.25 * up
+            return target + distance * (0.6 * n + 1.1 * along + 0.25 * up)
         along = np.cross(normals[0], up)
-        return target - 1.3 * along / np.linalg.norm(along) + 0.3 * up
+        return target + distance * (-1.3 * along / np.linalg.norm(along) + 0.3 * up)
 
-    def render(self, target: np.ndarray, width: int = 480, height: int = 360) -> np.ndarray:
+    def render(self, target: np.ndarray, width: int = 480, height: int = 360, distance: float = 1.0) -> np.ndarray:
         """An RGB picture ``(height, width, 3)`` looking at ``target`` from :meth:`camera_eye`."""
         bc = self._client
-        view = bc.computeViewMatrix(list(self.camera_eye(target)), list(target), [0, 0, 1])
+        view = bc.computeViewMatrix(list(self.camera_eye(target, distance)), list(target), [0, 0, 1])
         projection = bc.computeProjectionMatrixFOV(fov=60, aspect=width / height, nearVal=0.05, farVal=30.0)
         _, _, rgba, _, _ = bc.getCameraImage(
             width, height, view, projection, renderer=pybullet.ER_TINY_RENDERER, shadow=0

@@ -40,6 +40,8 @@ Lifecycle
 Public attributes that controllers may read (never the simulator's effect settings):
 ``vehicle``, ``scene``, ``reference``, ``action_mapping``, ``nominal_model``,
 ``control_dt``, ``time``, ``task``, ``config`` (the checked settings, :class:`~wall_env.config.EnvConfig`).
+Pictures follow the vehicle; set ``camera_target`` (a world point, m) and ``camera_distance``
+(a factor on the usual distance) for a fixed camera.
 
 Many vehicles at once: ``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``
 gives :class:`~wall_env.vector_env.WallInspectorVectorEnv`, the same code on N rows.
@@ -141,6 +143,10 @@ class WallInspectorEnv(gym.Env):
         self.n_steps = config.n_steps
         self.scene, self.reference = config.build()
         self.episode_parameters: dict[str, float] = {}
+        # pictures: the camera looks at the vehicle (``camera_target=None``) or at a fixed world point,
+        # from ``camera_distance`` times its usual distance
+        self.camera_target: np.ndarray | None = None
+        self.camera_distance = 1.0
 
         self._batch = EnvBatch(config, 1)
         # PyBullet holds the picture only: its world is made at the first render (at once for the human
@@ -215,7 +221,8 @@ class WallInspectorEnv(gym.Env):
         self._world.place_vehicle(p, x[3:7])
         if self.render_mode == "rgb_array":
             width, height = self.render_size
-            return self._world.render(p, width, height)
+            target = p if self.camera_target is None else np.asarray(self.camera_target, dtype=float)
+            return self._world.render(target, width, height, self.camera_distance)
         return None
 
     def close(self):
