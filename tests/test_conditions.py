@@ -211,3 +211,13 @@ def test_a_randomised_push_is_horizontal_with_the_drawn_magnitude():
     assert np.all(force[:, 2] == 0) and magnitude.min() >= 0.1 and magnitude.max() <= 1.0
     heading = np.arctan2(force[:, 1], force[:, 0])
     assert np.histogram(heading, bins=4, range=(-np.pi, np.pi))[0].min() > 50  # every quarter of the circle
+
+
+def test_a_drawn_motor_lag_shorter_than_a_physics_step_is_no_lag():
+    """RK4 at 1 ms cannot follow a 0.3 ms lag (it diverged to NaN states); such draws fly without lag."""
+    envs = _vector(400, 0, randomize={"motor_time_constant": (0.0, 0.01)})
+    drawn = envs.unwrapped.episode_parameters["motor_time_constant"]
+    assert np.all((drawn == 0) | (drawn >= 0.001)) and (drawn == 0).sum() > 20
+    for _ in range(20):
+        obs, *_ = envs.step(np.zeros((400, 4)))
+    assert np.all(np.isfinite(obs))

@@ -37,6 +37,7 @@ from wall_env.conditions.latency import split_delay
 from wall_env.config import DRAG_EFFECTS, EnvConfig
 from wall_env.contact import SURFACES
 from wall_env.dynamics import STATE_SIZE, BatchSimulator, StateIndex, Timing
+from wall_env.motor_lag import MIN_LAG_STEPS
 from wall_env.observation import CLEARANCE_CAP, OBSERVATION_FIELDS, OBSERVATION_SIZE, PREVIEW_STEPS
 from wall_env.rotations import euler_xyz_to_quat_rows, quat_to_rotation_rows
 from wall_env.streams import RandomStreams
@@ -227,7 +228,11 @@ class EnvBatch:
         mass = sample.get("mass", cfg.vehicle.mass)
         sim.mass[rows, 0] = mass
         if "motor_time_constant" in sample:
-            sim.timing[rows, Timing.motor_time_constant] = sample["motor_time_constant"]
+            # a lag shorter than a physics step is below what RK4 follows (MIN_LAG_STEPS): such a draw is no lag
+            tau = sample["motor_time_constant"]
+            tau = np.where(tau < MIN_LAG_STEPS * cfg.physics_dt, 0.0, tau)
+            self.episode_parameters["motor_time_constant"][rows] = tau
+            sim.timing[rows, Timing.motor_time_constant] = tau
         if "latency" in sample:
             total = np.round(sample["latency"] / cfg.physics_dt).astype(np.int64)
             self.command_delay[rows] = total // 2
