@@ -1,0 +1,61 @@
+"""What an agent remembers: stacked observations and a leaky integral of the position error, the same in training
+(a VecEnv wrapper) and in flight."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agents.history import HistorySettings, ObservationHistory, VecObservationHistory
+
+
+def _obs(n, value):
+    obs = np.zeros((n, 48), dtype=np.float32)
+    obs[:, 0] = value
+    obs[:, 18:21] = value  # p_error
+    return obs
+
+
+def test_frames_stride_and_integral_follow_their_definitions():
+    settings = HistorySettings(frames=3, stride=2, integral_time=0.5, control_dt=0.01)
+    history = ObservationHistory(settings)
+    assert settings.size == 3 * 48 + 3
+    out = [history(_obs(2, k), np.array([k == 0, k == 0])) for k in range(6)]
+    # at step 5 the frames are the observations of steps 1, 3, 5 (2 apart, newest last)
+    assert out[5][:, [0, 48, 96]].tolist() == [[1, 3, 5]] * 2
+    # before the episode has them, the first observation stands in
+    assert out[1][0, [0, 48, 96]].tolist() == [0, 0, 1]
+    decay = math.exp(-0.01 / 0.5)
+    integral = 0.0
+    for k in range(6):
+        integral = decay * integral + 0.01 * k
+    assert out[5][0, -3:] == pytest.approx([integral] * 3)
+    restarted = history(_obs(2, 7), np.array([True, False]))
+    assert restarted[0, [0, 48, 96]].tolist() == [7, 7, 7] and restarted[0, -1] == pytest.approx(0.07)
+    assert restarted[1, [0, 48, 96]].tolist() == [2, 4, 7]  # steps 2, 4 and the new one
+
+
+def test_bad_settings_are_named():
+    with pytest.raises(ValueError, match=r"history.frames must be an integer in \[1, 64\]"):
+        HistorySettings(frames=0)
+    with pytest.raises(ValueError, match="history takes"):
+        HistorySettings.from_spec({"length": 3})
+
+
+def test_the_wrapper_gives_an_ended_episode_its_own_last_inputs():
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    import wall_env  # noqa: F401
+
+    venv = DummyVecEnv([lambda: gym.make("WallInspector/WallHover-v0", duration=0.05)])
+    wrapped = VecObservationHistory(venv, HistorySettings(frames=2, integral_time=1.0))
+    first = wrapped.reset()
+    assert first.shape == (1, 2 * 48 + 3) and np.array_equal(first[0, :48], first[0, 48:96])
+    for _ in range(5):
+        features, _, dones, infos = wrapped.step(np.zeros((1, 4)))
+    assert dones[0] and infos[0]["terminal_observation"].shape == (2 * 48 + 3,)
+    # the new episode starts its own memory: both frames are its first observation
+    assert np.array_equal(features[0, :48], features[0, 48:96])
