@@ -137,7 +137,7 @@ class VecObservationHistory(VecEnvWrapper):
     def reset(self) -> np.ndarray:
         obs = self.venv.reset()
         self._ended[:] = True
-        return self.history(obs, self._ended)
+        return self.history(np.asarray(obs), self._ended)
 
     def step_wait(self):
         obs, rewards, dones, infos = self.venv.step_wait()
@@ -147,7 +147,7 @@ class VecObservationHistory(VecEnvWrapper):
             terminal = infos[k].get("terminal_observation")
             if terminal is not None:
                 infos[k]["terminal_observation"] = self._terminal(k, terminal)
-        features = self.history(obs, dones)
+        features = self.history(np.asarray(obs), dones)
         return features, rewards, dones, infos
 
     def _terminal(self, row: int, terminal: np.ndarray) -> np.ndarray:
