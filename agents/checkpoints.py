@@ -340,8 +340,10 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
 
 
 def training_env_steps(training: dict[str, Any]) -> int:
-    """Env steps a model card's ``training`` section spent: PPO's, plus a warm start's demonstrations."""
-    return int(training["total_timesteps"]) + int((training.get("warm_start") or {}).get("demo_env_steps", 0))
+    """Env steps a model card's ``training`` section spent: PPO's, plus a warm start's demonstrations and
+    a teacher's labelled flights (``--algo dagger``)."""
+    return (int(training["total_timesteps"]) + int((training.get("warm_start") or {}).get("demo_env_steps", 0))
+            + int((training.get("teacher") or {}).get("labels", 0)))
 
 
 def _warm_start_text(warm: dict[str, Any]) -> str:

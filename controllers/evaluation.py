@@ -48,6 +48,7 @@ import gymnasium as gym
 import numpy as np
 
 import wall_env  # noqa: F401  (registers the environments)
+from controllers.threads import choose_threads, limit_threads
 from wall_env.vehicle import GRAVITY
 
 __all__ = ["evaluate", "EvaluationResult", "EpisodeRecord", "solve_time_stats"]
@@ -180,6 +181,11 @@ def evaluate(
     factory) and return every step's record; see the module docstring.
 
     ``on_episode`` is called with each finished :class:`EpisodeRecord` (for progress bars).
+
+    The flights run with PyTorch (if imported) and BLAS held at the threads that
+    :func:`controllers.threads.choose_threads` gives work of one observation per call: one. A
+    second thread cannot speed up a policy acting on one observation, and spinning threads slow
+    everything else on a busy machine (a learner's PPO update, the other flights of a study).
     """
     seeds = [int(s) for s in seeds]
     if not seeds:
@@ -203,11 +209,13 @@ def evaluate(
     mapping = base.action_mapping
     hover_thrust = base.vehicle.mass * GRAVITY
     episodes = []
+    threads = choose_threads(most=1).threads  # one observation per step
     try:
-        for seed in seeds:
-            episodes.append(_fly(policy, environment, seed, deterministic, reset_options, mapping, hover_thrust))
-            if on_episode is not None:
-                on_episode(episodes[-1])
+        with limit_threads(threads):
+            for seed in seeds:
+                episodes.append(_fly(policy, environment, seed, deterministic, reset_options, mapping, hover_thrust))
+                if on_episode is not None:
+                    on_episode(episodes[-1])
     finally:
         environment.close()
     return EvaluationResult(_policy_name(policy), env_id, env_kwargs, seeds, episodes)
