@@ -172,7 +172,7 @@ class LeanPPO(PPO):
         self.logger.record("train/clip_fraction", float(clip_sum) / max(batches, 1))
         self.logger.record("train/loss", float(loss.detach()))
         self.logger.record("train/explained_variance", explained_var)
-        self.logger.record("train/std", float(torch.exp(policy.log_std).mean()))
+        self.logger.record("train/std", float(torch.exp(policy.log_std.detach()).mean()))
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/clip_range", clip_range)
         if clip_range_vf is not None:

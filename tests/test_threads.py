@@ -131,3 +131,14 @@ def test_evaluation_flies_on_one_thread_and_gives_the_others_back():
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(before)
+
+
+def test_ray_reserves_one_cpu_for_an_auto_run_and_the_explicit_threads_otherwise():
+    from agents.config import apply_overrides, default_config
+    from wall_inspector.train_on_ray import cpus_per_run
+
+    config = default_config("WallSweep")
+    assert config["torch_threads"] == "auto" and cpus_per_run(config) == 1
+    assert cpus_per_run(apply_overrides(config, ["torch_threads=2"])) == 2
+    with pytest.raises(ValueError, match=r"rollout_torch_threads must be 'auto'"):
+        apply_overrides(config, ["rollout_torch_threads=0"])
