@@ -71,12 +71,13 @@ _BASE: dict[str, Any] = {
     # the learner: "ppo" (agents.lean_ppo.LeanPPO, the task learned from its reward alone) or "dagger" (a
     # controller distilled into the network, agents.distillation; settings in teacher)
     "algo": "ppo",
-    # --algo dagger: teacher (None, "pid" or "scmpc"; built with residual_base_kwargs) flies envs batched envs
+    # --algo dagger: teacher ("pid" or "scmpc"; built with residual_base_kwargs) flies envs batched envs
     # for steps steps with DART noise up to noise, then iterations - 1 times the student flies and the teacher
-    # labels its states; after each, the normaliser, actor and critic are fitted to every label so far (epochs
-    # passes, minibatches of batch_size, Adam at learning_rate). Env k of iteration i flies seed
+    # labels its states; after each, the normaliser and the actor are fitted to every label so far (epochs
+    # passes, minibatches of batch_size, Adam at learning_rate) and judged on the evaluation envs: the best
+    # iteration is kept. Env k of iteration i flies seed
     # seed + (run seed * iterations + i) * envs + k: away from the card's and the evaluations' seeds
-    "teacher": {"controller": "scmpc", "envs": 16, "steps": 1700, "iterations": 2, "noise": 0.1, "epochs": 8,
+    "teacher": {"controller": "scmpc", "envs": 16, "steps": 1700, "iterations": 3, "noise": 0.1, "epochs": 10,
                 "batch_size": 1024, "learning_rate": 1.0e-3, "seed": 2_000_000},
     "timesteps": 1_000_000,
     "seed": 0,
@@ -103,6 +104,9 @@ _BASE: dict[str, Any] = {
         # None: constant; a number: the learning rate falls linearly from learning_rate to this
         # value over the run's planned timesteps (SB3's LinearSchedule)
         "learning_rate_final": None,
+        # None, or a target KL per minibatch step: the learning rate then adapts to keep the KL near it
+        # (x1.5 below half of it, /1.5 above twice it; agents.lean_ppo), starting from learning_rate
+        "adaptive_kl": None,
         "clip_range": 0.2,
         "ent_coef": 0.0,
         "vf_coef": 0.5,
@@ -246,6 +250,10 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
         number(f"ppo.{key}", ppo[key], 0.0, low_open=True)
     for key in ("ent_coef", "vf_coef"):
         number(f"ppo.{key}", ppo[key], 0.0)
+    if ppo["adaptive_kl"] is not None:
+        number("ppo.adaptive_kl", ppo["adaptive_kl"], 0.0, 1.0, low_open=True)
+        if ppo["learning_rate_final"] is not None:
+            raise ValueError("ppo.adaptive_kl adapts the learning rate itself: leave ppo.learning_rate_final unset (null)")
     if ppo["target_kl"] is not None:
         number("ppo.target_kl", ppo["target_kl"], 0.0, low_open=True)
     number("policy.log_std_init", config["policy"]["log_std_init"], -20.0, 5.0)

@@ -36,7 +36,20 @@ _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 
 
 class LeanPPO(PPO):
-    """Stable-Baselines3's PPO with lean rollouts and updates (module docstring)."""
+    """Stable-Baselines3's PPO with lean rollouts and updates (module docstring).
+
+    ``adaptive_kl``: ``None`` (the learning rate follows ``learning_rate``, a number or a schedule) or a
+    target KL divergence between the policies before and after a minibatch step: after each step the
+    learning rate is multiplied by 1.5 when the KL was below half the target and divided by 1.5 when it
+    was above twice the target (kept within [1e-5, 1e-2]), starting from ``learning_rate``.
+    """
+
+    def __init__(self, *args: Any, adaptive_kl: float | None = None, **kwargs: Any):
+        if adaptive_kl is not None and not 0.0 < float(adaptive_kl) < 1.0:
+            raise ValueError(f"adaptive_kl must be None or a KL in (0, 1), got {adaptive_kl!r}")
+        self.adaptive_kl = None if adaptive_kl is None else float(adaptive_kl)
+        self.adaptive_lr: float | None = None
+        super().__init__(*args, **kwargs)
 
     def _setup_model(self) -> None:
         super()._setup_model()
@@ -105,7 +118,14 @@ class LeanPPO(PPO):
 
         policy = self.policy
         policy.set_training_mode(True)
-        self._update_learning_rate(policy.optimizer)
+        adaptive = getattr(self, "adaptive_kl", None)
+        if adaptive is None:
+            self._update_learning_rate(policy.optimizer)
+        else:
+            if getattr(self, "adaptive_lr", None) is None:
+                self.adaptive_lr = float(self.lr_schedule(1.0))
+            for group in policy.optimizer.param_groups:
+                group["lr"] = self.adaptive_lr
         clip_range = float(self.clip_range(self._current_progress_remaining))  # type: ignore[operator]
         clip_range_vf = None if self.clip_range_vf is None else float(self.clip_range_vf(self._current_progress_remaining))  # type: ignore[operator]
         buf = self.rollout_buffer
@@ -161,6 +181,13 @@ class LeanPPO(PPO):
                 loss.backward()
                 torch.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm, foreach=True)
                 optimizer.step()
+                if adaptive is not None:
+                    lr = float(self.adaptive_lr)  # type: ignore[arg-type]
+                    step_kl = float(kl)
+                    lr = lr / 1.5 if step_kl > 2.0 * adaptive else lr * 1.5 if step_kl < 0.5 * adaptive else lr
+                    self.adaptive_lr = min(max(lr, 1e-5), 1e-2)
+                    for group in optimizer.param_groups:
+                        group["lr"] = self.adaptive_lr
             if not continue_training:
                 break
         self._n_updates += epoch + 1
@@ -175,5 +202,7 @@ class LeanPPO(PPO):
         self.logger.record("train/std", float(torch.exp(policy.log_std.detach()).mean()))
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/clip_range", clip_range)
+        if adaptive is not None:
+            self.logger.record("train/learning_rate", float(self.adaptive_lr))  # type: ignore[arg-type]
         if clip_range_vf is not None:
             self.logger.record("train/clip_range_vf", clip_range_vf)

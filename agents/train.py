@@ -296,6 +296,7 @@ def _make_ppo(config: dict[str, Any], env: Any, tb_dir: Path, verbose: int) -> A
                      "optimizer_kwargs": {"eps": 1e-5, "fused": True}}
     ppo = dict(config["ppo"])
     final = ppo.pop("learning_rate_final")
+    ppo["adaptive_kl"] = ppo.pop("adaptive_kl")
     if final is not None:  # progress runs over the planned timesteps, resumed runs included
         ppo["learning_rate"] = LinearSchedule(float(ppo["learning_rate"]), float(final), 1.0)
     return LeanPPO("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=config["seed"], tensorboard_log=str(tb_dir),
@@ -406,10 +407,6 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
             model = _make_ppo(config, train_env, out / "tb", verbose)
             if config["warm_start"]["controller"]:
                 warm = warm_start_from_controller(config, model, train_env, verbose=verbose)
-            if config["algo"] == "dagger":
-                from agents.distillation import distil
-
-                teacher = distil(config, model, train_env, verbose=verbose)
 
         # the same wrappers as the training env (sync_envs_normalization walks both stacks); one env
         # per evaluation episode (up to 32), so an evaluation flies its episodes side by side
@@ -433,7 +430,22 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         if warm is not None:  # the cloned policy is the first candidate for best/: PPO has to beat it
             warm["eval_mean_return"] = _evaluate_as_best(model, train_env, evaluation, out / "best",
                                                          policy_info(model, clock, description), checks)
-        if teacher is not None:  # the distilled policy is the result (no PPO steps follow)
+        if config["algo"] == "dagger" and not resume:
+            from stable_baselines3.common.evaluation import evaluate_policy
+            from stable_baselines3.common.vec_env import sync_envs_normalization
+
+            from agents.distillation import distil
+
+            def judge() -> float:  # the mean return of the evaluation episodes, the same ones for every iteration
+                sync_envs_normalization(train_env, eval_env)
+                eval_env.seed(int(config["eval"]["seed"]))
+                returns, _ = evaluate_policy(model, eval_env, n_eval_episodes=int(config["eval"]["episodes"]),
+                                             deterministic=True, return_episode_rewards=True)
+                return float(np.mean(returns))
+
+            teacher = distil(config, model, train_env, verbose=verbose, judge=judge)
+        if teacher is not None:  # the distilled policy is the result (no PPO steps follow); judged on the same episodes
+            eval_env.seed(int(config["eval"]["seed"]))
             teacher["eval_mean_return"] = _evaluate_as_best(model, train_env, evaluation, out / "best",
                                                             policy_info(model, clock, description), checks)
         ppo_started = time.perf_counter()

@@ -102,7 +102,12 @@ def test_train_algo_dagger_writes_a_distilled_agent_of_its_own(tmp_path, monkeyp
                  "--set", "teacher.epochs=4", "--set", "card_eval.episodes=1", "--eval-episodes", "1"])
     assert code == 0
     card = json.loads((out / "model_card.json").read_text())
-    assert card["training"]["total_timesteps"] == 0 and card["training"]["teacher"]["labels"] == 960
+    teacher = card["training"]["teacher"]
+    assert card["training"]["total_timesteps"] == 0 and teacher["labels"] == 3 * 4 * 120  # three iterations
+    # every iteration was judged on the evaluation envs and the best one kept: best/ holds it
+    judged = [it["judged"] for it in teacher["iterations"]]
+    assert teacher["kept_iteration"] == int(np.argmax(judged))
+    assert json.loads((out / "best" / "policy.json").read_text())["eval_mean_return"] == pytest.approx(max(judged), abs=0.006)
     assert card["training"]["time_split"] is None  # no PPO steps to split
     assert card["summary"].startswith("PID distilled DAgger-style") and "not alone" in card["summary"]
     assert "--algo dagger" in card["command"]

@@ -83,3 +83,17 @@ def test_a_saved_lean_model_is_plain_sb3_ppo(tmp_path):
 def test_lean_ppo_refuses_gsde():
     with pytest.raises(ValueError, match="without gSDE"):
         _model(LeanPPO, use_sde=True)
+
+
+@pytest.mark.parametrize("target, factors", [(0.5, 1.5 * 1.5), (1e-9, 1.5 / 1.5)])
+def test_adaptive_kl_steps_the_learning_rate_by_the_kl_of_each_minibatch(target, factors):
+    model = _model(LeanPPO, adaptive_kl=target, learning_rate=3e-4)
+    model.n_epochs = 2
+    _rollout(model)
+    model.train()
+    # the first step starts from the rollout's own policy (KL 0: the rate grows); the second sees the
+    # first step's change: far below half of 0.5 (grows again), far above twice 1e-9 (shrinks back)
+    assert model.adaptive_lr == pytest.approx(3e-4 * factors)
+    assert model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(3e-4 * factors)
+    with pytest.raises(ValueError, match=r"adaptive_kl must be None or a KL in \(0, 1\), got 2"):
+        _model(LeanPPO, adaptive_kl=2)
