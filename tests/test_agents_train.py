@@ -57,7 +57,8 @@ def test_cli_run_writes_checkpoints_logs_and_card(cli_run):
     assert saved["ppo"]["n_steps"] == 256 and saved["ppo"]["gamma"] == default_config("WallHover")["ppo"]["gamma"]
 
     card = json.loads((out / "model_card.json").read_text())
-    assert card["command"].startswith("wall-inspector train --env WallInspector/WallHover-v0 --timesteps 3072 --n-envs 4")
+    assert card["command"].startswith("wall-inspector train --env WallInspector/WallHover-v0 --algo ppo --timesteps 3072 "
+                                      "--n-envs 4")
     training = card["training"]
     assert training["total_timesteps"] == 3072 and training["timesteps_this_run"] == 3072
     assert 0 < training["wall_time_s"] < training["command_wall_time_s"]
@@ -68,6 +69,9 @@ def test_cli_run_writes_checkpoints_logs_and_card(cli_run):
     assert np.isfinite(metrics["wall_normal_rmse_m"])
     md = (out / "model_card.md").read_text()
     assert card["command"] in md and "wall_normal_rmse_m" in md
+    split = training["time_split"]
+    assert f"| time split (env steps / rest of the rollouts / updates and callbacks) | {split['env_step_s']} s" in md
+    assert "| PyTorch threads (controllers.threads) | setting auto; updates: " in md
 
 
 def test_cli_checkpoint_loads_and_flies(cli_run):
