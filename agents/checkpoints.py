@@ -374,10 +374,13 @@ def _split_text(split: dict[str, Any]) -> str:
 
 
 def _threads_text(threads: dict[str, Any]) -> str:
-    first = (threads.get("first_choice") or {}).get("update") or threads.get("at_start") or {}
-    updates = ", ".join(f"{n} on {k}" for k, n in (threads.get("updates_on_threads") or {}).items()) or "none"
+    start = threads.get("at_start") or {}
+    if not threads.get("updates_on_threads"):  # no PPO updates (a distillation): the threads it ran on
+        return f"{start.get('threads')} (setting {start.get('setting')}): {start.get('reason')}"
+    first = (threads.get("first_choice") or {}).get("update") or start
+    updates = ", ".join(f"{n} on {k}" for k, n in threads["updates_on_threads"].items())
     busy = threads.get("busy_elsewhere_cores")
-    return (f"setting {threads.get('settings', {}).get('update', (threads.get('at_start') or {}).get('setting'))}; "
+    return (f"setting {threads.get('settings', {}).get('update', start.get('setting'))}; "
             f"updates: {updates} thread(s); first choice: {first.get('reason')}"
             + (f"; others' load seen: median {busy['median']}, max {busy['max']} cores" if busy else ""))
 
