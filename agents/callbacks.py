@@ -150,7 +150,7 @@ ROLLOUT_ROWS_PER_THREAD = 512  # below this many observations per thread, the po
 def rollout_thread_cap(n_envs: int) -> int:
     """The most PyTorch threads that help while rollouts are collected: the policy acts on ``n_envs``
     observations at a time, and on a few hundred rows one thread is faster than two (the sweep's 32:
-    measured before issue 29)."""
+    measured with the earlier fixed settings)."""
     return max(1, int(n_envs) // ROLLOUT_ROWS_PER_THREAD)
 
 

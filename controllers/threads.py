@@ -17,8 +17,8 @@ and updates, evaluation, tuning, Ray workers)::
 
 Why: PyTorch's threads spin at every parallel region; two of them on a 2-core machine where a
 neighbour keeps one core busy wait on each other's preempted thread, and a PPO update runs
-tens of times slower than on one thread (issue 29: 981 env steps/s on two threads against
-25,740 on one, load average 4). ``SLACK`` = 0.25: a second thread is taken only when at least
+tens of times slower than on one thread (981 env steps/s on two threads against 25,740 on one,
+measured at load average 4). ``SLACK`` = 0.25: a second thread is taken only when at least
 0.75 of a core is free for it.
 
 :class:`CpuWatch` measures the others' load between two moments without sleeping (training
