@@ -59,10 +59,11 @@ def _scaled_rewards(normalizer: Any, rewards: np.ndarray) -> np.ndarray:
 
 
 def warm_start(model: Any, normalizer: Any, demos: Demonstrations, *, epochs: int = 30, batch_size: int = 1024,
-               learning_rate: float = 1e-3, holdout: float = 0.05, seed: int = 0) -> dict[str, Any]:
+               learning_rate: float = 1e-3, holdout: float = 0.05, seed: int = 0, fit_critic: bool = True) -> dict[str, Any]:
     """Fit ``normalizer`` to ``demos``, then clone the demonstrated actions into ``model``'s actor and
-    their returns into its critic (module docstring). Returns a report for the model card:
-    samples, epochs, seconds, and the actor's RMS action error on the held-out flights."""
+    their returns into its critic (module docstring; ``fit_critic=False``: the actor alone, for an agent
+    that PPO will not go on training). Returns a report for the model card: samples, epochs, seconds,
+    and the actor's RMS action error on the held-out flights."""
     import torch
 
     if isinstance(epochs, bool) or not isinstance(epochs, int) or epochs < 1:
@@ -89,7 +90,8 @@ def warm_start(model: Any, normalizer: Any, demos: Demonstrations, *, epochs: in
         return torch.as_tensor(obs), torch.as_tensor(actions, dtype=torch.float32), torch.as_tensor(values)
 
     obs, actions, values = tensors(~held)
-    trained = [p for name, p in policy.named_parameters() if name != "log_std"]
+    trained = [p for name, p in policy.named_parameters()
+               if name != "log_std" and (fit_critic or not name.startswith(("value_net", "mlp_extractor.value_net")))]
     optimizer = torch.optim.Adam(trained, lr=learning_rate)
     updates = epochs * int(np.ceil(len(obs) / batch_size))
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=updates)
@@ -103,7 +105,8 @@ def warm_start(model: Any, normalizer: Any, demos: Demonstrations, *, epochs: in
             rows = order[first:first + batch_size]
             mean = policy.get_distribution(obs[rows]).distribution.mean
             actor = torch.mean((mean - actions[rows]) ** 2)
-            critic = torch.mean((policy.predict_values(obs[rows]).squeeze(-1) - values[rows]) ** 2)
+            critic = (torch.mean((policy.predict_values(obs[rows]).squeeze(-1) - values[rows]) ** 2) if fit_critic
+                      else torch.zeros(()))
             optimizer.zero_grad()
             (actor + critic).backward()
             optimizer.step()
@@ -116,7 +119,7 @@ def warm_start(model: Any, normalizer: Any, demos: Demonstrations, *, epochs: in
     report: dict[str, Any] = {
         "samples": int(len(obs)), "epochs": epochs, "batch_size": batch_size, "learning_rate": learning_rate,
         "train_action_rmse": round(float(np.sqrt(actor_loss)), 5),
-        "train_value_rmse": round(float(np.sqrt(critic_loss)), 4),
+        **({"train_value_rmse": round(float(np.sqrt(critic_loss)), 4)} if fit_critic else {}),
         "value_target_mean": round(float(values.mean()), 3),
     }
     if held.any():
@@ -125,7 +128,8 @@ def warm_start(model: Any, normalizer: Any, demos: Demonstrations, *, epochs: in
             mean = policy.get_distribution(held_obs).distribution.mean
             report["heldout_samples"] = int(len(held_obs))
             report["heldout_action_rmse"] = round(float(torch.sqrt(torch.mean((mean - held_actions) ** 2))), 5)
-            report["heldout_value_rmse"] = round(
-                float(torch.sqrt(torch.mean((policy.predict_values(held_obs).squeeze(-1) - held_values) ** 2))), 4)
+            if fit_critic:
+                report["heldout_value_rmse"] = round(
+                    float(torch.sqrt(torch.mean((policy.predict_values(held_obs).squeeze(-1) - held_values) ** 2))), 4)
     report["wall_time_s"] = round(time.perf_counter() - start, 2)
     return report

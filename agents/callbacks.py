@@ -19,7 +19,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from agents.checkpoints import save_checkpoint
 
 __all__ = ["ProgressBar", "PeriodicCheckpoint", "SaveBestCheckpoint", "TrainingClock", "CollisionLog", "TorchThreads",
-           "policy_info"]
+           "policy_info", "rollout_thread_cap", "ROLLOUT_ROWS_PER_THREAD"]
 
 
 class TrainingClock:
@@ -144,24 +144,86 @@ class CollisionLog(BaseCallback):
             self.logger.record("rollout/collision_episode_fraction", float(np.mean(np.asarray(counts) > 0)))
 
 
-class TorchThreads(BaseCallback):
-    """PyTorch runs on ``rollout`` threads while rollouts are collected (the policy acting on one
-    observation per env, evaluations included) and on ``update`` threads for PPO's updates
-    (minibatches of ``batch_size``)."""
+ROLLOUT_ROWS_PER_THREAD = 512  # below this many observations per thread, the policy's forward pass is no faster split
 
-    def __init__(self, rollout: int, update: int):
+
+def rollout_thread_cap(n_envs: int) -> int:
+    """The most PyTorch threads that help while rollouts are collected: the policy acts on ``n_envs``
+    observations at a time, and on a few hundred rows one thread is faster than two (the sweep's 32:
+    measured with the earlier fixed settings)."""
+    return max(1, int(n_envs) // ROLLOUT_ROWS_PER_THREAD)
+
+
+class TorchThreads(BaseCallback):
+    """PyTorch's threads for each phase of training, by the rule of :mod:`controllers.threads`.
+
+    ``rollout`` and ``update``: ``"auto"`` or an explicit number (which wins). With ``"auto"`` the
+    cores free to this process are measured again at the end of every rollout, over the time since
+    the previous one (a :class:`~controllers.threads.CpuWatch`, no waiting), so a run that meets a
+    busy machine halfway drops to one thread for its next update and takes two again when the
+    neighbour has gone. Rollouts use at most :func:`rollout_thread_cap` threads. :meth:`report`
+    says what was chosen and why, for the model card.
+    """
+
+    def __init__(self, rollout: int | str, update: int | str, n_envs: int, most: int | None = None):
         super().__init__()
-        self.rollout, self.update = int(rollout), int(update)
+        from controllers.threads import check_thread_setting
+
+        self.rollout = check_thread_setting(rollout, "rollout_torch_threads")
+        self.update = check_thread_setting(update, "torch_threads")
+        self.n_envs, self.most = int(n_envs), most
+        self.watch: Any = None
+        self.first: dict[str, Any] = {}
+        self.counts: dict[str, dict[int, int]] = {"rollout": {}, "update": {}}
+        self.busy_seen: list[float] = []
+
+    def _choice(self, phase: str, setting: int | str, most: int | None) -> int:
+        from controllers.threads import choose_threads
+
+        choice = choose_threads(setting, most=most, watch=self.watch)
+        if choice.busy_elsewhere is not None:
+            self.busy_seen.append(choice.busy_elsewhere)
+        self.first.setdefault(phase, choice.as_dict())
+        self.counts[phase][choice.threads] = self.counts[phase].get(choice.threads, 0) + 1
+        return choice.threads
+
+    def _set(self, threads: int) -> None:
+        import torch
+
+        if torch.get_num_threads() != threads:
+            torch.set_num_threads(threads)
+
+    def _on_training_start(self) -> None:
+        from controllers.threads import CpuWatch
+
+        self.watch = CpuWatch()
 
     def _on_rollout_start(self) -> None:
-        import torch
-
-        torch.set_num_threads(self.rollout)
+        cap = rollout_thread_cap(self.n_envs) if self.most is None else min(rollout_thread_cap(self.n_envs), self.most)
+        threads = self.rollout if self.rollout != "auto" else 1 if cap == 1 else None
+        if threads is None:  # several threads could help: what is free? (measured over the last update)
+            threads = self._choice("rollout", "auto", cap)
+        else:
+            self.counts["rollout"][int(threads)] = self.counts["rollout"].get(int(threads), 0) + 1
+            self.first.setdefault("rollout", {"threads": int(threads), "setting": self.rollout, "reason": (
+                "set explicitly" if self.rollout != "auto" else
+                f"the policy acts on {self.n_envs} observations at a time: one thread is faster below "
+                f"{ROLLOUT_ROWS_PER_THREAD} per thread")})
+        self._set(int(threads))
 
     def _on_rollout_end(self) -> None:
-        import torch
-
-        torch.set_num_threads(self.update)
+        self._set(self._choice("update", self.update, self.most))
 
     def _on_step(self) -> bool:
         return True
+
+    def report(self) -> dict[str, Any]:
+        """For the model card: the settings, the first choice of each phase with its reason, how many
+        rollouts and updates ran on each number of threads, and the others' load seen (cores)."""
+        out: dict[str, Any] = {"settings": {"rollout": self.rollout, "update": self.update}, "first_choice": self.first,
+                               "rollouts_on_threads": {str(k): v for k, v in sorted(self.counts["rollout"].items())},
+                               "updates_on_threads": {str(k): v for k, v in sorted(self.counts["update"].items())}}
+        if self.busy_seen:
+            out["busy_elsewhere_cores"] = {"median": round(float(np.median(self.busy_seen)), 2),
+                                           "max": round(float(np.max(self.busy_seen)), 2)}
+        return out

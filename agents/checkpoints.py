@@ -298,7 +298,7 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
     json_path.write_text(json.dumps(card, indent=2, default=_jsonable))
     training, evaluation = card.get("training", {}), card.get("evaluation", {})
     lines = [
-        f"# PPO agent for {card.get('env_id', '?')}",
+        f"# {'Distilled' if training.get('teacher') else 'PPO'} agent for {card.get('env_id', '?')}",
         "",
         card.get("summary", ""),
         "",
@@ -322,6 +322,12 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
         ("residual base controller", card.get("residual") or "none"),
         *((("warm start (behaviour cloning, included in the wall-clock time)", _warm_start_text(training["warm_start"])),)
           if training.get("warm_start") else ()),
+        *((("teacher (DAgger, included in the wall-clock time)", _teacher_text(training["teacher"])),)
+          if training.get("teacher") else ()),
+        *((("time split (env steps / rest of the rollouts / updates and callbacks)", _split_text(training["time_split"])),)
+          if training.get("time_split") else ()),
+        *((("PyTorch threads (controllers.threads)", _threads_text(training["threads"])),)
+          if training.get("threads") else ()),
         ("domain randomisation", card.get("randomize") or "off"),
         ("seed", training.get("seed")),
         ("machine", training.get("machine")),
@@ -340,8 +346,10 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
 
 
 def training_env_steps(training: dict[str, Any]) -> int:
-    """Env steps a model card's ``training`` section spent: PPO's, plus a warm start's demonstrations."""
-    return int(training["total_timesteps"]) + int((training.get("warm_start") or {}).get("demo_env_steps", 0))
+    """Env steps a model card's ``training`` section spent: PPO's, plus a warm start's demonstrations and
+    a teacher's labelled flights (``--algo dagger``)."""
+    return (int(training["total_timesteps"]) + int((training.get("warm_start") or {}).get("demo_env_steps", 0))
+            + int((training.get("teacher") or {}).get("labels", 0)))
 
 
 def _warm_start_text(warm: dict[str, Any]) -> str:
@@ -350,6 +358,31 @@ def _warm_start_text(warm: dict[str, Any]) -> str:
             f"{warm.get('demo_wall_time_s')} s; cloned in {cloning.get('wall_time_s')} s ({cloning.get('epochs')} epochs, "
             f"RMS action error on held-out flights {cloning.get('heldout_action_rmse')}); PPO then "
             f"{warm.get('ppo_wall_time_s')} s")
+
+
+def _teacher_text(teacher: dict[str, Any]) -> str:
+    steps = "; ".join(f"{it['pilot']} flew {it['labels']} labelled steps in {it['flight_and_labels_s']} s, fitted in "
+                      f"{it['fit'].get('wall_time_s')} s (held-out action RMS error {it['fit'].get('heldout_action_rmse')})"
+                      for it in teacher.get("iterations", []))
+    return f"{teacher.get('controller')}: {steps}; {teacher.get('wall_time_s')} s in all"
+
+
+def _split_text(split: dict[str, Any]) -> str:
+    return (f"{split.get('env_step_s')} s / {split.get('rollout_other_s')} s / {split.get('update_and_callbacks_s')} s "
+            f"({100 * split.get('env_step_share', 0):.0f} / {100 * split.get('rollout_other_share', 0):.0f} / "
+            f"{100 * split.get('update_and_callbacks_share', 0):.0f} %)")
+
+
+def _threads_text(threads: dict[str, Any]) -> str:
+    start = threads.get("at_start") or {}
+    if not threads.get("updates_on_threads"):  # no PPO updates (a distillation): the threads it ran on
+        return f"{start.get('threads')} (setting {start.get('setting')}): {start.get('reason')}"
+    first = (threads.get("first_choice") or {}).get("update") or start
+    updates = ", ".join(f"{n} on {k}" for k, n in threads["updates_on_threads"].items())
+    busy = threads.get("busy_elsewhere_cores")
+    return (f"setting {threads.get('settings', {}).get('update', start.get('setting'))}; "
+            f"updates: {updates} thread(s); first choice: {first.get('reason')}"
+            + (f"; others' load seen: median {busy['median']}, max {busy['max']} cores" if busy else ""))
 
 
 def _jsonable(value: Any) -> Any:

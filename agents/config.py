@@ -20,6 +20,7 @@ from typing import Any
 
 import yaml
 
+from controllers.threads import check_thread_setting
 from wall_env.tasks import task_env_id, task_name, task_slug
 from wall_env.validation import read_mapping
 
@@ -32,6 +33,7 @@ __all__ = [
     "load_config",
     "apply_overrides",
     "validate_config",
+    "ALGORITHMS",
     "save_config",
     "base_controller_kwargs",
 ]
@@ -49,12 +51,13 @@ _BASE: dict[str, Any] = {
     # keywords for each base controller's from_env (residual base, or demonstrator of warm_start):
     # SC-MPC is given the paper's identified suction model (it is the controller's knowledge, not the simulator's truth)
     "residual_base_kwargs": {"pid": {"preset": "tuned"},
-                             # threads: SC-MPC solves a batched env's rows on both cores during rollouts;
+                             # threads: SC-MPC solves a batched env's rows on the cores free to the run
+                             # (auto: controllers.threads; both cores of a quiet 2-core machine);
                              # solver: one LM iteration per control step from the shifted previous
                              # solution (real-time iteration), 1.7x cheaper than iterating to the
                              # tolerance (2.2 iterations) and as precise on the sweep: 0.578 mm
                              # wall-normal RMSE either way over seeds 100-109
-                             "scmpc": {"k_s": 4.1, "d_thr": 0.132, "preset": "tuned", "threads": 2,
+                             "scmpc": {"k_s": 4.1, "d_thr": 0.132, "preset": "tuned", "threads": "auto",
                                        "solver": {"max_iterations": 1}}},
     # warm start (agents.behaviour_cloning): before PPO, a controller (None, "pid" or "scmpc"; built with
     # residual_base_kwargs) flies demo_envs batched envs for demo_steps steps each, acting with its action
@@ -65,6 +68,17 @@ _BASE: dict[str, Any] = {
     # the model card's (card_eval.seed up) and the evaluations' (eval.seed up)
     "warm_start": {"controller": None, "demo_envs": 128, "demo_steps": 1700, "noise": 0.1, "epochs": 20,
                    "batch_size": 1024, "learning_rate": 1.0e-3, "seed": 1_000_000},
+    # the learner: "ppo" (agents.lean_ppo.LeanPPO, the task learned from its reward alone) or "dagger" (a
+    # controller distilled into the network, agents.distillation; settings in teacher)
+    "algo": "ppo",
+    # --algo dagger: teacher ("pid" or "scmpc"; built with residual_base_kwargs) flies envs batched envs
+    # for steps steps with DART noise up to noise, then iterations - 1 times the student flies and the teacher
+    # labels its states; after each, the normaliser and the actor are fitted to every label so far (epochs
+    # passes, minibatches of batch_size, Adam at learning_rate) and judged on the evaluation envs: the best
+    # iteration is kept. Env k of iteration i flies seed
+    # seed + (run seed * iterations + i) * envs + k: away from the card's and the evaluations' seeds
+    "teacher": {"controller": "scmpc", "envs": 16, "steps": 1700, "iterations": 3, "noise": 0.1, "epochs": 10,
+                "batch_size": 1024, "learning_rate": 1.0e-3, "seed": 2_000_000},
     "timesteps": 1_000_000,
     "seed": 0,
     "n_envs": 32,  # environments in the vector env (16 per worker: IPC and SB3 overhead amortised)
@@ -72,10 +86,14 @@ _BASE: dict[str, Any] = {
     # "batched": every env in one batched env in the learner's process (one compiled call per step);
     # "subprocess": n_envs single envs in n_workers processes.
     "vector": "batched",
-    "torch_threads": 1,  # PyTorch threads of PPO's updates (and of a warm start's cloning)
-    # PyTorch threads while rollouts are collected: the policy then acts on n_envs observations at
-    # a time, which below a few hundred rows runs faster on one thread than split over two
-    "rollout_torch_threads": 1,
+    # PyTorch threads of the updates (and of a warm start's cloning or a teacher's distillation):
+    # "auto" takes the cores free to the process, measured again before every update
+    # (controllers.threads: never more threads than free cores); a number is used as given
+    "torch_threads": "auto",
+    # PyTorch threads while rollouts are collected: the policy then acts on n_envs observations at a
+    # time, which below ROLLOUT_ROWS_PER_THREAD rows per thread runs faster on one thread than split
+    # over two; "auto": that rule within the free cores
+    "rollout_torch_threads": "auto",
     "ppo": {
         "n_steps": 128,  # per environment per rollout: n_envs * n_steps = 4096 transitions per update
         "batch_size": 1024,
@@ -86,6 +104,9 @@ _BASE: dict[str, Any] = {
         # None: constant; a number: the learning rate falls linearly from learning_rate to this
         # value over the run's planned timesteps (SB3's LinearSchedule)
         "learning_rate_final": None,
+        # None, or a target KL per minibatch step: the learning rate then adapts to keep the KL near it
+        # (x1.5 below half of it, /1.5 above twice it; agents.lean_ppo), starting from learning_rate
+        "adaptive_kl": None,
         "clip_range": 0.2,
         "ent_coef": 0.0,
         "vf_coef": 0.5,
@@ -109,6 +130,7 @@ _ACTIVATIONS = ("tanh", "relu", "elu")
 # sections whose entries are free-form (keywords of the env or of a base controller, ranges by name)
 _OPEN_SECTIONS = ("env_kwargs", "randomize_ranges", "residual_base_kwargs")
 _RESIDUAL_BASES = (None, "pid", "scmpc")
+ALGORITHMS = ("ppo", "dagger")
 
 
 def _merge(base: dict, update: dict) -> dict:
@@ -202,8 +224,10 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
             raise ValueError(f"{name} must be in {'(' if low_open else '['}{low}, {high}], got {value!r}")
         return float(value)
 
-    for key in ("timesteps", "n_envs", "n_workers", "torch_threads", "rollout_torch_threads"):
+    for key in ("timesteps", "n_envs", "n_workers"):
         positive_int(key, config[key])
+    for key in ("torch_threads", "rollout_torch_threads"):
+        check_thread_setting(config[key], key)
     if isinstance(config["checkpoint_freq"], bool) or not isinstance(config["checkpoint_freq"], int) \
             or config["checkpoint_freq"] < 0:
         raise ValueError(f"checkpoint_freq must be a whole number of env steps >= 0, got {config['checkpoint_freq']!r}")
@@ -226,6 +250,10 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
         number(f"ppo.{key}", ppo[key], 0.0, low_open=True)
     for key in ("ent_coef", "vf_coef"):
         number(f"ppo.{key}", ppo[key], 0.0)
+    if ppo["adaptive_kl"] is not None:
+        number("ppo.adaptive_kl", ppo["adaptive_kl"], 0.0, 1.0, low_open=True)
+        if ppo["learning_rate_final"] is not None:
+            raise ValueError("ppo.adaptive_kl adapts the learning rate itself: leave ppo.learning_rate_final unset (null)")
     if ppo["target_kl"] is not None:
         number("ppo.target_kl", ppo["target_kl"], 0.0, low_open=True)
     number("policy.log_std_init", config["policy"]["log_std_init"], -20.0, 5.0)
@@ -262,6 +290,20 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
     number("warm_start.learning_rate", warm["learning_rate"], 0.0, low_open=True)
     if isinstance(warm["seed"], bool) or not isinstance(warm["seed"], int) or warm["seed"] < 0:
         raise ValueError(f"warm_start.seed must be a whole number >= 0, got {warm['seed']!r}")
+    if config["algo"] not in ALGORITHMS:
+        raise ValueError(f"algo must be one of {ALGORITHMS}, got {config['algo']!r}")
+    teacher = config["teacher"]
+    if teacher["controller"] not in ("pid", "scmpc"):
+        raise ValueError(f"teacher.controller must be 'pid' or 'scmpc', got {teacher['controller']!r}")
+    for key in ("envs", "steps", "iterations", "epochs", "batch_size"):
+        positive_int(f"teacher.{key}", teacher[key])
+    number("teacher.noise", teacher["noise"], 0.0, 1.0)
+    number("teacher.learning_rate", teacher["learning_rate"], 0.0, low_open=True)
+    if isinstance(teacher["seed"], bool) or not isinstance(teacher["seed"], int) or teacher["seed"] < 0:
+        raise ValueError(f"teacher.seed must be a whole number >= 0, got {teacher['seed']!r}")
+    if config["algo"] == "dagger" and (config["residual"] or warm["controller"]):
+        raise ValueError("algo dagger distils its teacher into a policy that flies the task itself: it takes neither "
+                         "residual nor warm_start")
     base_kwargs = config["residual_base_kwargs"]
     if not (isinstance(base_kwargs, dict) and all(isinstance(v, dict) or v is None for v in base_kwargs.values())):
         raise ValueError(f"residual_base_kwargs must map a base controller to its keywords, got {base_kwargs!r}")

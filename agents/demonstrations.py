@@ -22,6 +22,7 @@ The rewards, terminations and time-limit ends are recorded too, for fitting a cr
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -58,10 +59,27 @@ class Demonstrations:
         """Observations ``(n_samples, obs_size)`` and clean actions ``(n_samples, act_size)``."""
         return (self.observations.reshape(self.n_samples, -1), self.actions.reshape(self.n_samples, -1))
 
+    def join(self, other: Demonstrations) -> Demonstrations:
+        """These flights and ``other``'s side by side (as more envs; both must have the same number of steps)."""
+        if other.observations.shape[0] != self.observations.shape[0]:
+            raise ValueError(f"demonstrations of {self.observations.shape[0]} and {other.observations.shape[0]} steps "
+                             "cannot be joined env by env")
+        def side_by_side(name: str) -> np.ndarray:
+            return np.concatenate([getattr(self, name), getattr(other, name)], axis=1)
 
-def record_demonstrations(venv: VecEnv, controller: Any, steps: int, noise: float = 0.0, seed: int = 0) -> Demonstrations:
+        return Demonstrations(side_by_side("observations"), side_by_side("actions"), side_by_side("applied"),
+                              side_by_side("rewards"), side_by_side("dones"), side_by_side("truncated"),
+                              np.concatenate([self.noise, other.noise]), self.wall_time_s + other.wall_time_s)
+
+
+def record_demonstrations(venv: VecEnv, controller: Any, steps: int, noise: float = 0.0, seed: int = 0,
+                          pilot: Callable[[np.ndarray], np.ndarray] | None = None) -> Demonstrations:
     """Fly ``controller`` (SB3-style ``predict`` over a batch) for ``steps`` steps of ``venv``
     (an SB3 ``VecEnv`` that resets finished envs itself); see the module docstring.
+
+    ``pilot``: another policy flies instead (``pilot(observations) -> actions`` for the batch, plus
+    the noise), and ``controller`` labels the states it reaches, answering every step so that its
+    memory follows the flight (DAgger: the expert relabels the student's states).
 
     ``noise``: the largest per-env std of the Gaussian noise added to the applied action
     (normalised units, >= 0); ``seed`` seeds the env (env ``k`` resets with seed ``seed + k``, as
@@ -93,7 +111,8 @@ def record_demonstrations(venv: VecEnv, controller: Any, steps: int, noise: floa
     for t in range(steps):
         clean, _ = controller.predict(obs, state=None, episode_start=episode_start, deterministic=True)
         clean = np.asarray(clean, dtype=np.float32).reshape(n, act_size)
-        noisy = np.clip(clean + sigma[:, None] * rng.standard_normal((n, act_size)), low, high).astype(np.float32)
+        flown = clean if pilot is None else np.asarray(pilot(obs), dtype=np.float32).reshape(n, act_size)
+        noisy = np.clip(flown + sigma[:, None] * rng.standard_normal((n, act_size)), low, high).astype(np.float32)
         observations[t], actions[t], applied[t] = obs, clean, noisy
         next_obs, reward, done, infos = venv.step(noisy)
         obs = np.asarray(next_obs)

@@ -50,7 +50,8 @@ BASE_CONTROLLERS = ("pid", "scmpc")
 
 def make_base_controller(name: str, env: gym.Env | VecEnv, **kwargs: Any):
     """Build base controller ``name`` (``"pid"`` or ``"scmpc"``) for ``env`` with the
-    :mod:`controllers` package's ``from_env`` constructors."""
+    :mod:`controllers` package's ``from_env`` constructors. ``threads="auto"`` (SC-MPC's threads
+    over a batch's rows) becomes the number :func:`controllers.threads.choose_threads` gives now."""
     if name not in BASE_CONTROLLERS:
         raise ValueError(f"residual base must be one of {BASE_CONTROLLERS}, got {name!r}")
     try:
@@ -66,6 +67,10 @@ def make_base_controller(name: str, env: gym.Env | VecEnv, **kwargs: Any):
             cls = None
     if cls is None:
         raise ImportError(f"controllers.{class_name} is not available; residual base {name!r} cannot be built")
+    if kwargs.get("threads") == "auto":  # SC-MPC's solver threads for a batch: the cores free now (controllers.threads)
+        from controllers.threads import choose_threads
+
+        kwargs = {**kwargs, "threads": choose_threads().threads}
     return cls.from_env(env.unwrapped, **kwargs)
 
 

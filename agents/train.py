@@ -93,6 +93,9 @@ class TrainingInterrupted(KeyboardInterrupt):
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", help="task, e.g. WallInspector/WallSweep-v0 (or WallSweep-v0, wall_sweep)")
+    parser.add_argument("--algo", choices=["ppo", "dagger"],
+                        help="ppo: PPO learns the task from its reward alone (default); dagger: a controller (teacher.controller, "
+                             "SC-MPC) is distilled into the network, DAgger-style (settings: teacher.* in the config)")
     parser.add_argument("--timesteps", type=int, help="total env steps (default: the task's config)")
     parser.add_argument("--n-envs", type=int, help="environments in the vector env (default: config, 32)")
     parser.add_argument("--workers", type=int, help="worker processes running them with --vector subprocess "
@@ -138,7 +141,7 @@ def _config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         config = default_config(args.env)
     flags = {
         "timesteps": args.timesteps, "n_envs": args.n_envs, "n_workers": args.workers, "seed": args.seed,
-        "vector": args.vector,
+        "vector": args.vector, "algo": args.algo,
         "randomize": args.randomize, "checkpoint_freq": args.checkpoint_freq,
         "checkpoint_minutes": args.checkpoint_minutes,
         "residual": None if args.residual == "none" else args.residual,
@@ -163,6 +166,8 @@ def planned_timesteps(config: dict[str, Any], start: int = 0) -> int:
 
     ``ValueError`` if not even one rollout fits.
     """
+    if config.get("algo", "ppo") == "dagger":  # no PPO steps: the teacher's labels are the training
+        return int(start)
     rollout = int(config["n_envs"]) * int(config["ppo"]["n_steps"])
     rollouts = (int(config["timesteps"]) - int(start)) // rollout
     if rollouts < 1:
@@ -178,7 +183,8 @@ def _command(args: argparse.Namespace, config: dict[str, Any]) -> str:
     if args.resume:
         parts = ["wall-inspector", "train", "--resume", args.resume, "--timesteps", str(config["timesteps"])]
     else:
-        parts = ["wall-inspector", "train", "--env", config["env_id"], "--timesteps", str(config["timesteps"]),
+        parts = ["wall-inspector", "train", "--env", config["env_id"], "--algo", config["algo"],
+                 "--timesteps", str(config["timesteps"]),
                  "--n-envs", str(config["n_envs"]), "--vector", config["vector"], "--workers", str(config["n_workers"]),
                  "--seed", str(config["seed"]), "--out", str(args.out)]
         if args.config:
@@ -216,7 +222,8 @@ def policy_description(config: dict[str, Any]) -> dict[str, Any]:
     if config["residual"]:
         residual = {"base": config["residual"], "scale": [float(s) for s in config["residual_scale"]],
                     "base_kwargs": base_controller_kwargs(config, config["residual"])}
-    return {"env_id": config["env_id"], "algorithm": "PPO", "residual": residual}
+    algorithm = "PPO" if config.get("algo", "ppo") == "ppo" else f"DAgger (teacher: {config['teacher']['controller']})"
+    return {"env_id": config["env_id"], "algorithm": algorithm, "residual": residual}
 
 
 def check_observations(config: dict[str, Any], n: int = 8, seed: int = 12345) -> np.ndarray:
@@ -276,8 +283,9 @@ def _latest_checkpoint(run_dir: Path) -> Path:
 
 def _make_ppo(config: dict[str, Any], env: Any, tb_dir: Path, verbose: int) -> Any:
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.utils import LinearSchedule
+
+    from agents.lean_ppo import LeanPPO
 
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU}[config["policy"]["activation"]]
     arch = list(config["policy"]["net_arch"])
@@ -288,9 +296,10 @@ def _make_ppo(config: dict[str, Any], env: Any, tb_dir: Path, verbose: int) -> A
                      "optimizer_kwargs": {"eps": 1e-5, "fused": True}}
     ppo = dict(config["ppo"])
     final = ppo.pop("learning_rate_final")
+    ppo["adaptive_kl"] = ppo.pop("adaptive_kl")
     if final is not None:  # progress runs over the planned timesteps, resumed runs included
         ppo["learning_rate"] = LinearSchedule(float(ppo["learning_rate"]), float(final), 1.0)
-    return PPO("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=config["seed"], tensorboard_log=str(tb_dir),
+    return LeanPPO("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=config["seed"], tensorboard_log=str(tb_dir),
                device="cpu", verbose=verbose, **ppo)
 
 
@@ -336,12 +345,13 @@ class TrainingRun:
 
 def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, progress_bar: bool = True,
           verbose: int = 1, command: str | None = None, checks: np.ndarray | None = None,
-          on_checkpoint: Callable[[Path], object] | None = None) -> TrainingRun:
+          on_checkpoint: Callable[[Path], object] | None = None, most_threads: int | None = None) -> TrainingRun:
     """Train (or, with ``resume``, continue) a run in ``out_dir``.
 
     ``checks``: the observations of :func:`check_observations` if already computed.
     ``on_checkpoint``: called with every periodic checkpoint folder right after it is written
     (``wall-inspector train --ray`` hands them to Ray Tune, to resume a trial whose worker died).
+    ``most_threads``: the most PyTorch threads the run may take whatever is free (a Ray trial's CPUs).
 
     Raises :class:`TrainingInterrupted` on Ctrl-C, after saving a checkpoint to resume from.
     """
@@ -352,10 +362,12 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     from agents.callbacks import CollisionLog, PeriodicCheckpoint, ProgressBar, SaveBestCheckpoint, TorchThreads, TrainingClock, policy_info
     from agents.checkpoints import load_model, read_json, save_checkpoint, write_model_card
     from agents.envs import make_vec_env
+    from controllers.threads import choose_threads
 
     started = time.perf_counter()
     out = Path(out_dir)
-    torch.set_num_threads(int(config["torch_threads"]))
+    start_threads = choose_threads(config["torch_threads"], most=most_threads)  # a warm start's cloning runs on these
+    torch.set_num_threads(start_threads.threads)
     description = policy_description(config)
     norm = config["normalize"]
     git = git_state()  # the code this run starts from
@@ -380,6 +392,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     venv = make_vec_env(config, config["n_envs"], config["n_workers"], vector=vector_kind(config))
     eval_env = None
     warm: dict[str, Any] | None = None
+    teacher: dict[str, Any] | None = None
     try:
         train_env = VecNormalize(venv, norm_obs=norm["norm_obs"], norm_reward=norm["norm_reward"],
                                  clip_obs=float(norm["clip_obs"]), clip_reward=float(norm["clip_reward"]),
@@ -417,19 +430,39 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         if warm is not None:  # the cloned policy is the first candidate for best/: PPO has to beat it
             warm["eval_mean_return"] = _evaluate_as_best(model, train_env, evaluation, out / "best",
                                                          policy_info(model, clock, description), checks)
+        if config["algo"] == "dagger" and not resume:
+            from stable_baselines3.common.evaluation import evaluate_policy
+            from stable_baselines3.common.vec_env import sync_envs_normalization
+
+            from agents.distillation import distil
+
+            def judge() -> float:  # the mean return of the evaluation episodes, the same ones for every iteration
+                sync_envs_normalization(train_env, eval_env)
+                eval_env.seed(int(config["eval"]["seed"]))
+                returns, _ = evaluate_policy(model, eval_env, n_eval_episodes=int(config["eval"]["episodes"]),
+                                             deterministic=True, return_episode_rewards=True)
+                return float(np.mean(returns))
+
+            teacher = distil(config, model, train_env, verbose=verbose, judge=judge)
+        if teacher is not None:  # the distilled policy is the result (no PPO steps follow); judged on the same episodes
+            eval_env.seed(int(config["eval"]["seed"]))
+            teacher["eval_mean_return"] = _evaluate_as_best(model, train_env, evaluation, out / "best",
+                                                            policy_info(model, clock, description), checks)
         ppo_started = time.perf_counter()
         time_split = TimeSplit(venv)  # wrappers pass step_time_s on from the env (and a residual's base) that count it
         periodic = PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks,
                                       every_s=60.0 * float(config["checkpoint_minutes"]), on_save=on_checkpoint)
-        threads = TorchThreads(rollout=int(config["rollout_torch_threads"]), update=int(config["torch_threads"]))
+        threads = TorchThreads(rollout=config["rollout_torch_threads"], update=config["torch_threads"],
+                               n_envs=int(config["n_envs"]), most=most_threads)
         callbacks = [threads, time_split, evaluation, CollisionLog(), periodic]
         if progress_bar:
             callbacks.append(ProgressBar(target_steps, initial=start_steps))
 
         try:
-            with _unchecked_distributions():
-                model.learn(total_timesteps=target_steps - start_steps, callback=CallbackList(callbacks),
-                            reset_num_timesteps=not resume, tb_log_name="ppo", progress_bar=False)
+            if target_steps > start_steps:
+                with _unchecked_distributions():
+                    model.learn(total_timesteps=target_steps - start_steps, callback=CallbackList(callbacks),
+                                reset_num_timesteps=not resume, tb_log_name="ppo", progress_bar=False)
         except KeyboardInterrupt:
             saved = periodic.save()  # model, statistics, step count and wall time: all --resume needs
             raise TrainingInterrupted(out, saved, int(model.num_timesteps)) from None
@@ -455,7 +488,9 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         "wall_time_s": round(run_time, 2),
         "total_wall_time_s": round(total_time, 2),
         "steps_per_s": round(steps_this_run / max(run_time, 1e-9), 1),
-        "time_split": time_split.split(),
+        "time_split": time_split.split() if steps_this_run else None,
+        "threads": {"at_start": start_threads.as_dict(), **threads.report()},
+        **({"teacher": teacher} if teacher is not None else {}),
         **({"warm_start": {**warm, "ppo_wall_time_s": round(ppo_time, 2)}} if warm is not None else {}),
         "n_envs": config["n_envs"],
         "vector": vector_kind(config),
@@ -545,7 +580,11 @@ def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None,
     info = json.loads((checkpoint / "policy.json").read_text())
     return {
         "env_id": config["env_id"],
-        "summary": ("PPO (Stable-Baselines3, MLP " + "x".join(map(str, config["policy"]["net_arch"])) + ") "
+        "summary": (f"{config['teacher']['controller'].upper().replace('SCMPC', 'SC-MPC')} distilled DAgger-style into "
+                    "an MLP " + "x".join(map(str, config["policy"]["net_arch"])) + " (saved as a Stable-Baselines3 PPO "
+                    "model; it learned from a teacher, not alone), flying the task directly."
+                    if config.get("algo") == "dagger" else
+                    "PPO (Stable-Baselines3, MLP " + "x".join(map(str, config["policy"]["net_arch"])) + ") "
                     + (f"learning a residual correction on top of {config['residual']}" if config["residual"]
                        else "flying the task directly (collective thrust and body rates)")
                     + (f", warm-started by behaviour cloning of {config['warm_start']['controller']}"
@@ -571,17 +610,20 @@ def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None,
     }
 
 
-def ship(run_dir: Path, task: str, residual: str | None = None, warm_start: str | None = None) -> Path:
+def ship(run_dir: Path, task: str, residual: str | None = None, warm_start: str | None = None,
+         teacher: str | None = None) -> Path:
     """Copy ``run_dir/best`` and the run's model card into ``agents/pretrained/<task>/``
     (``<task>_residual_<base>/`` for a residual agent, ``<task>_warm_start_<controller>/`` for one
-    started from a controller's demonstrations, where ``policy_factory(variant=...)`` looks).
+    started from a controller's demonstrations, ``<task>_teacher_<controller>/`` for one distilled from a
+    controller (``--algo dagger``), where ``policy_factory(variant=...)`` looks).
 
     A warm-started agent has its own folder: it learned from the controller it is compared with,
     so it never takes the place of the agent that learned the task alone (the comparison's PPO)."""
     from agents.checkpoints import copy_checkpoint
     from agents.policy import pretrained_path
 
-    variant = f"residual_{residual}" if residual else f"warm_start_{warm_start}" if warm_start else ""
+    variant = (f"residual_{residual}" if residual else f"warm_start_{warm_start}" if warm_start
+               else f"teacher_{teacher}" if teacher else "")
     target = pretrained_path(task, variant)
     copy_checkpoint(run_dir / "best", target)
     for name in ("model_card.json", "model_card.md"):
@@ -607,6 +649,7 @@ def _resumed_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
     if not (run_dir / "config.yaml").is_file():
         raise ValueError(f"cannot resume: {run_dir / 'config.yaml'} does not exist")
     changing = [flag for flag, value in (("--env", args.env), ("--config", args.config), ("--n-envs", args.n_envs),
+                                         ("--algo", args.algo),
                                          ("--seed", args.seed), ("--randomize", args.randomize),
                                          ("--residual", args.residual), ("--warm-start", args.warm_start),
                                          ("--set", args.set or None),
@@ -614,6 +657,9 @@ def _resumed_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
     if changing:
         raise ValueError(f"--resume continues the saved configuration; drop {', '.join(changing)}")
     config = load_config(run_dir / "config.yaml", validate=False)
+    if config.get("algo") == "dagger":
+        raise ValueError(f"{run_dir} holds a distilled agent (algo dagger): it has no PPO steps to continue; "
+                         "train a new run")
     for key, value in (("timesteps", args.timesteps), ("n_workers", args.workers),
                        ("checkpoint_freq", args.checkpoint_freq), ("checkpoint_minutes", args.checkpoint_minutes)):
         if value is not None:
@@ -670,6 +716,7 @@ def run(args: argparse.Namespace) -> int:
           f"collisions {m['collisions']}")
     print(f"model card: {out / 'model_card.md'}")
     if args.ship:
-        target = ship(out, config["env_id"], config["residual"], config["warm_start"]["controller"])
+        target = ship(out, config["env_id"], config["residual"], config["warm_start"]["controller"],
+                      config["teacher"]["controller"] if config["algo"] == "dagger" else None)
         print(f"shipped to {target}")
     return 0

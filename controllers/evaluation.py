@@ -48,6 +48,7 @@ import gymnasium as gym
 import numpy as np
 
 import wall_env  # noqa: F401  (registers the environments)
+from controllers.threads import choose_threads, limit_threads
 from wall_env import interrupts
 from wall_env.vehicle import GRAVITY
 
@@ -181,6 +182,11 @@ def evaluate(
     factory) and return every step's record; see the module docstring.
 
     ``on_episode`` is called with each finished :class:`EpisodeRecord` (for progress bars).
+
+    The flights run with PyTorch (if imported) and BLAS held at the threads that
+    :func:`controllers.threads.choose_threads` gives work of one observation per call: one. A
+    second thread cannot speed up a policy acting on one observation, and spinning threads slow
+    everything else on a busy machine (a learner's PPO update, the other flights of a study).
     """
     seeds = [int(s) for s in seeds]
     if not seeds:
@@ -204,11 +210,13 @@ def evaluate(
     mapping = base.action_mapping
     hover_thrust = base.vehicle.mass * GRAVITY
     episodes = []
+    threads = choose_threads(most=1).threads  # one observation per step
     try:
-        for seed in seeds:
-            episodes.append(_fly(policy, environment, seed, deterministic, reset_options, mapping, hover_thrust))
-            if on_episode is not None:
-                on_episode(episodes[-1])
+        with limit_threads(threads):
+            for seed in seeds:
+                episodes.append(_fly(policy, environment, seed, deterministic, reset_options, mapping, hover_thrust))
+                if on_episode is not None:
+                    on_episode(episodes[-1])
     finally:
         environment.close()
     return EvaluationResult(_policy_name(policy), env_id, env_kwargs, seeds, episodes)
@@ -250,20 +258,21 @@ def evaluate_batched(
         running = np.ones(n, dtype=bool)
         terminated_early = np.zeros(n, dtype=bool)
         state, episode_start = None, np.ones(n, dtype=bool)
-        while running.any():
-            interrupts.check()
-            action, state = policy.predict(observation, state=state, episode_start=episode_start,
-                                           deterministic=deterministic)
-            action = np.asarray(action, dtype=float).reshape(n, 4)
-            episode_start = np.zeros(n, dtype=bool)
-            observation, _, terminated, truncated, info = envs.step(action)
-            for key in ("time", "p_world", "p_ref", "wall_clearance"):
-                rows[key].append(np.array(info[key], dtype=float))
-            rows["collision"].append(np.array(info["collision"], dtype=bool))
-            rows["action"].append(np.clip(action, -1.0, 1.0))
-            steps += running
-            terminated_early |= running & terminated
-            running &= ~(terminated | truncated)
+        with limit_threads(choose_threads(most=1).threads):  # a small batch per call: one thread is fastest
+            while running.any():
+                interrupts.check()
+                action, state = policy.predict(observation, state=state, episode_start=episode_start,
+                                               deterministic=deterministic)
+                action = np.asarray(action, dtype=float).reshape(n, 4)
+                episode_start = np.zeros(n, dtype=bool)
+                observation, _, terminated, truncated, info = envs.step(action)
+                for key in ("time", "p_world", "p_ref", "wall_clearance"):
+                    rows[key].append(np.array(info[key], dtype=float))
+                rows["collision"].append(np.array(info["collision"], dtype=bool))
+                rows["action"].append(np.clip(action, -1.0, 1.0))
+                steps += running
+                terminated_early |= running & terminated
+                running &= ~(terminated | truncated)
     finally:
         envs.close()
     stacked = {key: np.stack(value, axis=1) for key, value in rows.items()}  # (n, steps, ...)

@@ -126,7 +126,7 @@ def test_shipped_model_cards_name_their_commit_and_say_what_differed():
     from agents.policy import PRETRAINED_DIR
 
     cards = sorted(PRETRAINED_DIR.glob("*/model_card.json"))
-    assert len(cards) == 5
+    assert len(cards) == 6
     for path in cards:
         training = json.loads(path.read_text())["training"]
         assert re.fullmatch(r"[0-9a-f]{40}", training["git_commit"]), path  # a commit, nothing vague appended
@@ -136,13 +136,13 @@ def test_shipped_model_cards_name_their_commit_and_say_what_differed():
             assert f"{training['git_commit']} plus uncommitted changes" in md
 
 
-@pytest.mark.parametrize("residual, warm_start, folder", [
-    (None, None, "wall_sweep"), ("scmpc", None, "wall_sweep_residual_scmpc"),
-    (None, "scmpc", "wall_sweep_warm_start_scmpc"),
+@pytest.mark.parametrize("residual, warm_start, teacher, folder", [
+    (None, None, None, "wall_sweep"), ("scmpc", None, None, "wall_sweep_residual_scmpc"),
+    (None, "scmpc", None, "wall_sweep_warm_start_scmpc"), (None, None, "scmpc", "wall_sweep_teacher_scmpc"),
 ])
-def test_ship_keeps_each_kind_of_agent_in_its_own_folder(tmp_path, monkeypatch, residual, warm_start, folder):
-    """A warm-started agent learned from the controller it is compared with, so shipping it never
-    replaces the agent that learned the task alone (the comparison's PPO)."""
+def test_ship_keeps_each_kind_of_agent_in_its_own_folder(tmp_path, monkeypatch, residual, warm_start, teacher, folder):
+    """A warm-started or distilled agent learned from the controller it is compared with, so shipping it
+    never replaces the agent that learned the task alone (the comparison's PPO)."""
     import agents.policy
     from agents.train import ship
 
@@ -153,7 +153,7 @@ def test_ship_keeps_each_kind_of_agent_in_its_own_folder(tmp_path, monkeypatch, 
         (run / "best" / name).write_text(name)
     for name in ("model_card.json", "model_card.md"):
         (run / name).write_text(name)
-    target = ship(run, SWEEP, residual, warm_start)
+    target = ship(run, SWEEP, residual, warm_start, teacher)
     assert target == tmp_path / "pretrained" / folder
     assert sorted(p.name for p in target.iterdir()) == sorted(
         ["model.zip", "vecnormalize.pkl", "policy.json", "model_card.json", "model_card.md"])

@@ -57,7 +57,8 @@ def test_cli_run_writes_checkpoints_logs_and_card(cli_run):
     assert saved["ppo"]["n_steps"] == 256 and saved["ppo"]["gamma"] == default_config("WallHover")["ppo"]["gamma"]
 
     card = json.loads((out / "model_card.json").read_text())
-    assert card["command"].startswith("wall-inspector train --env WallInspector/WallHover-v0 --timesteps 3072 --n-envs 4")
+    assert card["command"].startswith("wall-inspector train --env WallInspector/WallHover-v0 --algo ppo --timesteps 3072 "
+                                      "--n-envs 4")
     training = card["training"]
     assert training["total_timesteps"] == 3072 and training["timesteps_this_run"] == 3072
     assert 0 < training["wall_time_s"] < training["command_wall_time_s"]
@@ -68,6 +69,9 @@ def test_cli_run_writes_checkpoints_logs_and_card(cli_run):
     assert np.isfinite(metrics["wall_normal_rmse_m"])
     md = (out / "model_card.md").read_text()
     assert card["command"] in md and "wall_normal_rmse_m" in md
+    split = training["time_split"]
+    assert f"| time split (env steps / rest of the rollouts / updates and callbacks) | {split['env_step_s']} s" in md
+    assert "| PyTorch threads (controllers.threads) | setting auto; updates: " in md
 
 
 def test_cli_checkpoint_loads_and_flies(cli_run):
@@ -297,15 +301,71 @@ def test_final_learning_rate_above_the_initial_one_is_refused():
         validate_config(config)
 
 
+class _Watch:
+    """A CpuWatch stand-in: other processes' load as a test sets it."""
+
+    def __init__(self, busy: float, cpus: int = 2):
+        self.busy, self.cpus = busy, list(range(cpus))
+
+    def busy_elsewhere(self) -> float:
+        return self.busy
+
+
 def test_rollouts_and_updates_run_on_their_own_thread_counts():
     from agents.callbacks import TorchThreads
 
     before = torch.get_num_threads()
     try:
-        threads = TorchThreads(rollout=1, update=2)
+        threads = TorchThreads(rollout=1, update=2, n_envs=32)
+        threads.watch = _Watch(busy=1.9)  # explicit settings win whatever the machine does
         threads.on_rollout_start()
         assert torch.get_num_threads() == 1
         threads.on_rollout_end()
         assert torch.get_num_threads() == 2
+        assert threads.report()["first_choice"]["update"]["reason"] == "set explicitly"
     finally:
         torch.set_num_threads(before)
+
+
+def test_auto_threads_follow_the_free_cores_update_by_update():
+    from agents.callbacks import TorchThreads
+
+    before = torch.get_num_threads()
+    try:
+        threads = TorchThreads(rollout="auto", update="auto", n_envs=32)
+        threads.watch = watch = _Watch(busy=0.05)
+        used = []
+        for busy in (0.05, 1.0, 0.6, 0.1):  # quiet, a neighbour takes a core, it eases, it leaves
+            watch.busy = busy
+            threads.on_rollout_start()
+            assert torch.get_num_threads() == 1  # 32 observations: one thread, whatever is free
+            threads.on_rollout_end()
+            used.append(torch.get_num_threads())
+        # 1.95 free: two; 1.0 free: one; 1.4 free (less than 0.75 of a core left for a second): one; 1.9: two
+        assert used == [2, 1, 1, 2]
+        report = threads.report()
+        assert report["updates_on_threads"] == {"1": 2, "2": 2} and report["rollouts_on_threads"] == {"1": 4}
+        assert report["busy_elsewhere_cores"]["max"] == 1.0
+        assert "1.95 of 2 allowed cores free" in report["first_choice"]["update"]["reason"]
+        capped = TorchThreads(rollout="auto", update="auto", n_envs=32, most=1)  # a Ray trial given one CPU
+        capped.watch = _Watch(busy=0.0)
+        capped.on_rollout_end()
+        assert torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
+
+
+def test_a_run_writes_its_thread_choice_into_the_model_card(tmp_path):
+    config = default_config("WallHover")
+    config.update(timesteps=1024, n_envs=2, n_workers=1, checkpoint_freq=0, checkpoint_minutes=0.0)
+    config["ppo"].update(n_steps=256, batch_size=256, n_epochs=1)
+    config["eval"].update(freq=100_000, episodes=1)
+    config["card_eval"]["episodes"] = 1
+    card = train(config, tmp_path / "hover", progress_bar=False, verbose=0).card
+    threads = card["training"]["threads"]
+    assert threads["settings"] == {"rollout": "auto", "update": "auto"}
+    assert threads["at_start"]["setting"] == "auto" and 1 <= threads["at_start"]["threads"] <= 2
+    assert sum(threads["updates_on_threads"].values()) == 2  # two rollouts of 512 steps, an update after each
+    assert "allowed cores free" in threads["first_choice"]["update"]["reason"]
+    forced = train({**config, "torch_threads": 1}, tmp_path / "forced", progress_bar=False, verbose=0).card
+    assert forced["training"]["threads"]["updates_on_threads"] == {"1": 2}

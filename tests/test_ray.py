@@ -63,8 +63,10 @@ def test_compare_on_a_two_node_cluster_writes_the_local_json_byte_for_byte(clust
     assert local == remote
     assert (tmp_path / "local" / "tables.md").read_bytes() == (tmp_path / "ray" / "tables.md").read_bytes()
     data = json.loads(local)
-    # 3 Table I rows x 5 policies (PID, MPC, SC-MPC both forms, PPO) + Table II's 6 (and PPO + SC-MPC)
-    assert len(data["runs"]) == 3 * 5 + 6
+    # 3 Table I rows x 5 policies (PID, MPC, SC-MPC both forms, PPO) + Table II's 7 (and PPO + SC-MPC and
+    # SC-MPC distilled, the agent that learned from SC-MPC: a row of its own)
+    assert len(data["runs"]) == 3 * 5 + 7
+    assert [r["policy"] for r in data["runs"]].count("SC-MPC distilled (DAgger)") == 1
     assert [e["seed"] for e in data["runs"][-1]["per_episode"]] == [0, 1]
     assert all(run["metrics"]["steps"] == 40 * len(run["per_episode"]) for run in data["runs"])
     assert "solve_ms" not in local.decode()  # timing lives in timing.json
@@ -72,8 +74,8 @@ def test_compare_on_a_two_node_cluster_writes_the_local_json_byte_for_byte(clust
     sc = next(r for r in timing["runs"] if r["policy"] == "SC-MPC" and "Table II" in r["scenario"])
     assert sc["solve_ms"]["count"] == 80 and 0 < sc["solve_ms"]["median"] < 100
     assert [e["solve_ms"]["count"] for e in sc["per_episode"]] == [40, 40]
-    assert timing["flights"]["count"] == 3 * 5 + 6 * 2 and timing["flights"]["executor"].startswith("Ray")
-    assert len(timing["flights"]["seconds_each"]) == 27 and all(s > 0 for s in timing["flights"]["seconds_each"])
+    assert timing["flights"]["count"] == 3 * 5 + 7 * 2 and timing["flights"]["executor"].startswith("Ray")
+    assert len(timing["flights"]["seconds_each"]) == 29 and all(s > 0 for s in timing["flights"]["seconds_each"])
     assert not ray.is_initialized()  # the command disconnected; the cluster goes on
 
 
@@ -126,7 +128,7 @@ def test_train_plans_one_run_per_seed_and_sweep_point(tmp_path):
     assert sorted((r["config"]["seed"], r["config"]["ppo"]["learning_rate"]) for r in runs) == [
         (s, lr) for s in (0, 1, 2) for lr in (1e-4, 3e-4)]
     assert all(r["config"]["ppo"]["n_epochs"] == 1 for r in runs)
-    assert runs[0]["command"].startswith(f"wall-inspector train --env WallInspector/WallHover-v0 --timesteps {STEPS}")
+    assert runs[0]["command"].startswith(f"wall-inspector train --env WallInspector/WallHover-v0 --algo ppo --timesteps {STEPS}")
 
 
 @pytest.mark.parametrize("args, message", [

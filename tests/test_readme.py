@@ -49,6 +49,13 @@ def test_model_cards_become_one_row_each(tmp_path):
     (tmp_path / "wall_sweep" / "model_card.json").write_text(json.dumps(card))
     row = [line for line in agents_table(tmp_path).splitlines() if "WallSweep-v0" in line][0]
     assert row.startswith("| [`WallSweep-v0`, warm-started from SC-MPC demonstrations](")
+    # a distilled agent: a row that says so, its teacher's labelled steps as its env steps, no PPO rate
+    del card["training"]["warm_start"]
+    card["training"].update(total_timesteps=0, steps_per_s=0.0, teacher={"controller": "scmpc", "labels": 81_600})
+    (tmp_path / "wall_sweep" / "model_card.json").write_text(json.dumps(card))
+    row = [line for line in agents_table(tmp_path).splitlines() if "WallSweep-v0" in line][0]
+    assert row.startswith("| [`WallSweep-v0`, distilled from SC-MPC (DAgger)](")
+    assert "| 81,600 | 25.0 min | - | 32 in 2 processes |" in row
 
 
 def _python_block_after(heading: str) -> str:

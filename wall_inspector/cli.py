@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench-ray": ("wall_inspector.bench_ray", "measure compare --ray: speed-up with 2 CPUs over 1, Ray's overhead per flight"),
     "tune": ("wall_inspector.tune", "tune a controller's gains or weights on a task within a budget (Optuna), write a preset"),
     "train": ("wall_inspector.train", "train a PPO agent on a wall task (checkpoints, TensorBoard, model card; --ray: many runs)"),
+    "bench-train": ("wall_inspector.bench_train", "time training to the target over several seeds, and its speed beside a busy core"),
     "notebooks": ("wall_inspector.notebooks", "run the notebooks top to bottom (and save their outputs)"),
     "readme": ("wall_inspector.readme", "copy result tables written by other commands into README.md"),
     "import-log": ("discovery.import_log", "convert a PX4 ULog or a ROS 2 bag into the project's flight log (CSV + JSON)"),

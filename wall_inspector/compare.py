@@ -226,6 +226,8 @@ def _ppo_policies(env_id: str, residual: bool) -> dict:
         print(f"no shipped PPO agent for {task} ({pretrained_path(task)}): PPO left out")
     if residual and pretrained_path(task, "residual_scmpc").is_dir():
         policies["PPO + SC-MPC"] = policy_factory(variant="residual_scmpc")
+    if pretrained_path(task, "teacher_scmpc").is_dir():  # its own row: it learned from SC-MPC, not alone
+        policies["SC-MPC distilled (DAgger)"] = policy_factory(variant="teacher_scmpc")
     return policies
 
 

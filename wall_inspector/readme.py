@@ -40,7 +40,10 @@ def _envs(training: dict) -> str:
 
 
 def agents_table(pretrained: Path) -> str:
-    """One row per shipped agent, from its ``model_card.json``."""
+    """One row per shipped agent, from its ``model_card.json`` (timesteps: the env steps the agent's
+    training spent, a controller's demonstrations or a teacher's labels included)."""
+    from agents.checkpoints import training_env_steps
+
     lines = [
         "| agent | timesteps | training wall time | env steps/s | envs | episodes completed | "
         "position RMSE | wall-normal RMSE | contact steps |",
@@ -57,12 +60,19 @@ def agents_table(pretrained: Path) -> str:
         warm = (t.get("warm_start") or {}).get("controller")
         if warm:
             name += f", warm-started from {_BASE_NAMES.get(warm, warm)} demonstrations"
+        teacher = (t.get("teacher") or {}).get("controller")
+        if teacher:  # a row of its own: it learned from the controller, not alone
+            name += f", distilled from {_BASE_NAMES.get(teacher, teacher)} (DAgger)"
+        rate = f"{t['steps_per_s']:,.0f}" if t["total_timesteps"] else "-"
+        envs = f"{card['config']['teacher']['envs']} batched" if teacher and "config" in card else _envs(t)
         lines.append(
-            f"| [{name}]({card_path.parent.as_posix()}/model_card.md) | {t['total_timesteps']:,} | "
-            f"{t['total_wall_time_s'] / 60:.1f} min | {t['steps_per_s']:,.0f} | {_envs(t)} | {100 * m['completed']:.0f} % | "
+            f"| [{name}]({card_path.parent.as_posix()}/model_card.md) | {training_env_steps(t):,} | "
+            f"{t['total_wall_time_s'] / 60:.1f} min | {rate} | {envs} | {100 * m['completed']:.0f} % | "
             f"{100 * m['position_rmse_m']:.2f} cm | {100 * m['wall_normal_rmse_m']:.2f} cm | {m['collisions']} |")
     lines += ["", f"From each agent's model card: trained by `wall-inspector train ... --ship` on this 2-core machine "
-              f"(the card holds the exact command; env steps/s include the evaluations during training), "
+              f"(the card holds the exact command and, in its threads row, the load other jobs put on the machine; "
+              f"timesteps include a controller's demonstrations or a teacher's labelled steps; env steps/s include "
+              f"the evaluations during training), "
               f"evaluated on the task's nominal settings with command noise "
               f"over {'/'.join(str(n) for n in sorted(seeds))} seeds by the evaluation function of the comparison tables."]
     return "\n".join(lines) + "\n"

@@ -24,8 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --ray: one run per point of the grid in this YAML file (configuration keys as in "
                              "--set, each with a list of values), e.g. {ppo.learning_rate: [1.0e-4, 3.0e-4]}")
     parser.add_argument("--cpus-per-trial", type=float, default=None,
-                        help="with --ray: CPUs Ray reserves for each run (default: n_workers with --vector subprocess, "
-                             "else the more of torch_threads and rollout_torch_threads: the processes or threads a run keeps busy)")
+                        help="with --ray: CPUs Ray reserves for each run, and the most PyTorch threads it takes (default: "
+                             "n_workers with --vector subprocess, else the more of torch_threads and rollout_torch_threads "
+                             "when set, 1 when they are auto)")
     parser.add_argument("--max-failures", type=int, default=3,
                         help="with --ray: times a run is restarted from its last checkpoint after its worker died "
                              "(default 3)")

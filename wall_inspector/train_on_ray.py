@@ -20,7 +20,9 @@ checkpoints.
 Resource hints: each trial reserves ``--cpus-per-trial`` CPUs (default
 :func:`cpus_per_run`: with ``--vector subprocess`` the run's ``n_workers``, the processes
 its environments step in; with the batched env, all in the learner's process, the more of
-its ``torch_threads`` and ``rollout_torch_threads``), so Ray never starts more runs on a node than its CPUs carry.
+its ``torch_threads`` and ``rollout_torch_threads`` when set, one when they are ``"auto"``), so Ray never
+starts more runs on a node than its CPUs carry; within a trial, the thread rule of
+:mod:`controllers.threads` never takes more PyTorch threads than the CPUs reserved for it.
 """
 
 from __future__ import annotations
@@ -107,12 +109,14 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 def cpus_per_run(config: dict[str, Any]) -> int:
     """The CPUs a training run keeps busy: its worker processes with ``vector: subprocess``, else (one batched
-    env in the learner's process) the learner's PyTorch threads (the more of updates and rollouts)."""
+    env in the learner's process) the learner's PyTorch threads: the more of updates and rollouts when set
+    explicitly, one for ``"auto"`` (the thread rule then keeps the run within the CPUs Ray gave it)."""
     from agents.train import vector_kind
 
     if vector_kind(config) == "subprocess":
         return max(1, int(config["n_workers"]))
-    return max(1, int(config["torch_threads"]), int(config["rollout_torch_threads"]))
+    explicit = [int(config[key]) for key in ("torch_threads", "rollout_torch_threads") if config[key] != "auto"]
+    return max([1, *explicit])
 
 
 def _report_checkpoint(run_dir: Path, folder: Path | None, metrics: dict[str, Any]) -> None:
@@ -132,7 +136,7 @@ def _report_checkpoint(run_dir: Path, folder: Path | None, metrics: dict[str, An
         tune.report(metrics, checkpoint=tune.Checkpoint.from_directory(tmp))
 
 
-def _trial(params: dict[str, Any], runs: list[dict[str, Any]]) -> None:
+def _trial(params: dict[str, Any], runs: list[dict[str, Any]], cpus: float = 1.0) -> None:
     """One training run as a Ray Tune trial (see the module docstring)."""
     from ray import tune
 
@@ -155,8 +159,9 @@ def _trial(params: dict[str, Any], runs: list[dict[str, Any]]) -> None:
         steps = int(read_json(folder / "policy.json").get("num_timesteps", 0))
         _report_checkpoint(run_dir, folder, {"timesteps": steps, "finished": False, "resumed_from": resumed_from})
 
+    # the thread rule (controllers.threads) within the CPUs Ray reserved for this trial
     result = train(spec["config"], run_dir, resume=checkpoint is not None, progress_bar=False, verbose=0,
-                   command=spec["command"], on_checkpoint=hand_over)
+                   command=spec["command"], on_checkpoint=hand_over, most_threads=max(1, int(cpus)))
     training, metrics = result.card["training"], result.card["evaluation"]["metrics"]
     _report_checkpoint(run_dir, None, {
         "timesteps": int(training["total_timesteps"]), "finished": True, "resumed_from": resumed_from,
@@ -198,7 +203,7 @@ def run(args: argparse.Namespace, *, callbacks: list[Any] | None = None) -> int:
 
     with ray_backend.session(args.ray, args.ray_cpus):
         tuner = tune.Tuner(
-            tune.with_resources(tune.with_parameters(_trial, runs=runs), {"cpu": cpus}),
+            tune.with_resources(tune.with_parameters(_trial, runs=runs, cpus=cpus), {"cpu": cpus}),
             param_space={"run": tune.grid_search(list(range(len(runs))))},
             tune_config=tune.TuneConfig(num_samples=1),
             run_config=tune.RunConfig(name="ray", storage_path=str(out / "ray"), verbose=0 if args.quiet else 1,

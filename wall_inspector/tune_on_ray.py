@@ -14,6 +14,10 @@ so TPE proposes a trial before the ones still running have told it their results
 the sequence of trials is not the local one; and no trial is pruned (the local study's
 median pruner needs the running trials' intermediate values in order): every trial flies
 every training seed. Ray Tune's own files (trial logs) go to ``RUN/ray/``.
+
+Threads: a trial flies its seeds through :func:`controllers.evaluation.evaluate`, which holds
+PyTorch and BLAS at the one thread that the thread rule (:mod:`controllers.threads`) gives a
+policy acting on one observation at a time, as the local study's trials do.
 """
 
 from __future__ import annotations

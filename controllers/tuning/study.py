@@ -13,6 +13,10 @@ time spent and the env steps flown in the study's attributes, so running the sam
 command again after Ctrl-C continues where it stopped. When the budget is spent the
 best trial flies the held-out seeds, and ``RUN/preset.yaml`` (the preset with its
 provenance) and ``RUN/report.json`` are written.
+
+Every flight goes through :func:`controllers.evaluation.evaluate`, which runs it on the one
+thread the thread rule (:mod:`controllers.threads`) gives a policy acting on one observation at a
+time: a study never spins idle threads against the other work of its machine.
 """
 
 from __future__ import annotations
