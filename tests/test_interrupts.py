@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wall_env.run_lock import LOCK_NAME
+from wall_env.run_lock import lock_path
 
 CLI = [sys.executable, "-m", "wall_inspector.cli"]
 
@@ -22,7 +22,7 @@ def _interrupt_at_random_moments(command: list[str], out: Path, moments: int, lo
     rng = np.random.default_rng(seed)
     cut = 0
     for _ in range(moments):
-        lock = out / LOCK_NAME
+        lock = lock_path(out)
         if lock.exists():
             lock.write_text("")  # the previous, interrupted run's record: wait for this run's own
         process = subprocess.Popen([*CLI, *command, "--out", str(out)], stdout=subprocess.DEVNULL,

@@ -10,13 +10,13 @@ import time
 
 import pytest
 
-from wall_env.run_lock import LOCK_NAME, RunFolderBusy, RunLock
+from wall_env.run_lock import RunFolderBusy, RunLock, lock_path
 from wall_inspector.cli import main as cli_main
 
 
 def _wait_for_holder(folder, timeout=120.0):
     """The lock file's record once a run holds it (the event itself, polled; the timeout only guards a hang)."""
-    path = folder / LOCK_NAME
+    path = lock_path(folder)
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if path.is_file() and path.read_text().strip():
@@ -61,7 +61,7 @@ def test_a_second_run_into_the_folder_of_a_running_one_refuses_and_changes_nothi
         assert cli_main([*command, "--out", str(out)]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and f"in use by 'wall-inspector {command[0]}' (pid {holder['pid']}" in err
-        assert json.loads((out / LOCK_NAME).read_text())["pid"] == first.pid  # the refused run wrote nothing there
+        assert json.loads(lock_path(out).read_text())["pid"] == first.pid  # the refused run wrote nothing there
         assert first.poll() is None  # and the first one runs on
     finally:
         first.send_signal(signal.SIGINT)

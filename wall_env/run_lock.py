@@ -3,8 +3,10 @@
 ``train``, ``tune``, ``compare``, ``robustness``, ``discover`` and ``fly`` write several files
 into one folder over minutes; two of them writing into the same folder at once would mix
 their files (the second run's config beside the first run's model). :class:`RunLock` holds
-an exclusive ``flock`` on ``FOLDER/.wall-inspector.lock`` for as long as the run lasts and
-writes into it who holds it (command, process id, host, start time). A second run into the
+an exclusive ``flock`` on a lock file of the folder for as long as the run lasts and writes
+into it who holds it (command, process id, host, start time). The lock file lives in this
+machine's cache (``$WALL_INSPECTOR_CACHE/locks/``, named by the folder's resolved path), not in
+the folder, whose files stay the run's own; so the lock guards runs on one machine. A second run into the
 folder finds the lock held and refuses with :class:`RunFolderBusy`, whose message names the
 running one. The kernel releases the ``flock`` when the holding process ends, however it
 ends (Ctrl-C, a crash, SIGKILL), so a lock left by a dead process is taken over at once, with
@@ -21,13 +23,23 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["RunLock", "RunFolderBusy", "LOCK_NAME", "lock_run_folder"]
-
-LOCK_NAME = ".wall-inspector.lock"
+__all__ = ["RunLock", "RunFolderBusy", "lock_path", "lock_run_folder"]
 
 
 class RunFolderBusy(RuntimeError):
     """Another run holds the folder's lock."""
+
+
+def lock_path(folder: str | Path) -> Path:
+    """The lock file of run folder ``folder`` (in this machine's cache, one per resolved path)."""
+    import hashlib
+
+    from wall_env.codegen import cache_dir
+
+    key = hashlib.sha256(str(Path(folder).resolve()).encode()).hexdigest()[:24]
+    locks = cache_dir() / "locks"
+    locks.mkdir(parents=True, exist_ok=True)
+    return locks / f"{key}.lock"
 
 
 class RunLock:
@@ -37,7 +49,7 @@ class RunLock:
     def __init__(self, folder: str | Path, command: str):
         self.folder = Path(folder)
         self.command = command
-        self.path = self.folder / LOCK_NAME
+        self.path = lock_path(self.folder)
         self.stale_holder: dict[str, Any] | None = None  # who held it before, if that process had died
         self._fd: int | None = None
 
