@@ -35,7 +35,8 @@ def _interrupt_at_random_moments(command: list[str], out: Path, moments: int, lo
         assert "Traceback" not in err, err
         if process.returncode == 0:
             break  # it finished before the interrupt
-        assert process.returncode == 130, (process.returncode, err)
+        # 130, or killed by SIGINT itself (-2) when Python ends on it: a shell shows 130 for both
+        assert process.returncode in (130, -signal.SIGINT), (process.returncode, err)
         cut += 1
     finished = subprocess.run([*CLI, *command, "--out", str(out)], capture_output=True, text=True, timeout=600)
     assert finished.returncode == 0, finished.stderr
