@@ -79,6 +79,9 @@ _BASE: dict[str, Any] = {
     # seed + (run seed * iterations + i) * envs + k: away from the card's and the evaluations' seeds
     "teacher": {"controller": "scmpc", "envs": 16, "steps": 1700, "iterations": 3, "noise": 0.1, "epochs": 10,
                 "batch_size": 1024, "learning_rate": 1.0e-3, "seed": 2_000_000},
+    # what the agent remembers (agents.history): the last `frames` observations `stride` steps apart and a
+    # leaky integral of the position error with time constant `integral_time` (s; 0: none)
+    "history": {"frames": 1, "stride": 1, "integral_time": 0.0},
     "timesteps": 1_000_000,
     "seed": 0,
     "n_envs": 32,  # environments in the vector env (16 per worker: IPC and SB3 overhead amortised)
@@ -290,6 +293,9 @@ def validate_config(config: dict[str, Any]) -> dict[str, Any]:
     number("warm_start.learning_rate", warm["learning_rate"], 0.0, low_open=True)
     if isinstance(warm["seed"], bool) or not isinstance(warm["seed"], int) or warm["seed"] < 0:
         raise ValueError(f"warm_start.seed must be a whole number >= 0, got {warm['seed']!r}")
+    from agents.history import HistorySettings
+
+    HistorySettings.from_spec(config["history"])  # ValueError naming the field and its range
     if config["algo"] not in ALGORITHMS:
         raise ValueError(f"algo must be one of {ALGORITHMS}, got {config['algo']!r}")
     teacher = config["teacher"]

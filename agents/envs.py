@@ -28,7 +28,7 @@ from agents.config import base_controller_kwargs
 from agents.residual import ResidualActionWrapper, ResidualVecEnv, make_base_controller
 from agents.vec_env import MultiEnvSubprocVecEnv
 
-__all__ = ["env_kwargs", "make_env", "env_factory", "make_vec_env", "VECTOR_KINDS"]
+__all__ = ["env_kwargs", "make_env", "env_factory", "make_vec_env", "history_settings", "VECTOR_KINDS"]
 
 VECTOR_KINDS = ("batched", "subprocess")
 
@@ -71,6 +71,14 @@ def env_factory(config: dict[str, Any], randomize: bool | None = None) -> Callab
     return build
 
 
+def history_settings(config: dict[str, Any]) -> Any:
+    """The configuration's :class:`~agents.history.HistorySettings` at its env's control period."""
+    from agents.history import HistorySettings
+
+    spec = {**config.get("history", {}), "control_dt": float(config["env_kwargs"].get("control_dt", 0.01))}
+    return HistorySettings.from_spec(spec)
+
+
 def make_vec_env(config: dict[str, Any], n_envs: int, n_workers: int = 0, randomize: bool | None = None,
                  vector: str = "subprocess") -> VecEnv:
     """``n_envs`` environments: ``vector="batched"``, the batched env in this process (residual
@@ -87,8 +95,18 @@ def make_vec_env(config: dict[str, Any], n_envs: int, n_workers: int = 0, random
             name = config["residual"]
             venv = ResidualVecEnv(venv, make_base_controller(name, venv, **base_controller_kwargs(config, name)),
                                   scale=config["residual_scale"])
-        return VecMonitor(venv, info_keywords=MONITOR_INFO_KEYS)
+        return _remembering(VecMonitor(venv, info_keywords=MONITOR_INFO_KEYS), config)
     fns = [env_factory(config, randomize) for _ in range(n_envs)]
     if n_workers <= 0:
-        return DummyVecEnv(fns)
-    return MultiEnvSubprocVecEnv(fns, n_workers=n_workers)
+        return _remembering(DummyVecEnv(fns), config)
+    return _remembering(MultiEnvSubprocVecEnv(fns, n_workers=n_workers), config)
+
+
+def _remembering(venv: VecEnv, config: dict[str, Any]) -> VecEnv:
+    """``venv`` with the configuration's observation history (:mod:`agents.history`), if it has one."""
+    settings = history_settings(config)
+    if settings.trivial:
+        return venv
+    from agents.history import VecObservationHistory
+
+    return VecObservationHistory(venv, settings)

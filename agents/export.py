@@ -21,7 +21,11 @@ more than :data:`TOLERANCE`. :class:`OnnxPolicy` runs the file with onnxruntime 
 Stable-Baselines3's ``predict``; :func:`time_onnx_steps` times it one observation per call.
 
 Residual agents are not exported: their action needs the base controller's (MPC or
-PID) action as an input, which an ONNX file does not hold.
+PID) action as an input, which an ONNX file does not hold. An agent with an observation
+history (:mod:`agents.history`) is exported from its network's input, the history features
+(the last observations and the position-error integral): the vehicle keeps that history
+itself, as :class:`agents.history.ObservationHistory` does; the file's metadata ``history``
+gives its settings.
 """
 
 from __future__ import annotations
@@ -182,11 +186,12 @@ def export_onnx(source: str | Path | TrainedPolicy, path: str | Path) -> Path:
         model = onnx.load(str(draft))
         metadata = {"producer": "wall-inspector export", "env_id": str(policy.env_id),
                     "source": str(policy.path) if policy.path else "", "observation_size": str(size),
-                    "action": "normalised [T, wx, wy, wz] in [-1, 1] (wall_env.actions)"}
+                    "action": "normalised [T, wx, wy, wz] in [-1, 1] (wall_env.actions)",
+                    "history": json.dumps(policy.info.get("history"))}
         onnx.helper.set_model_props(model, metadata)
         onnx.save(model, str(draft))
-        observations = _check_observations(policy)
-        expected, _ = policy.predict(observations)
+        observations = _check_observations(policy)  # the network's inputs (history features, if it has one)
+        expected, _ = policy.model.predict(policy.normalize(observations), deterministic=True)
         actions, _ = OnnxPolicy(draft).predict(observations)
         worst = float(np.max(np.abs(actions - expected)))
         if not worst <= TOLERANCE:
@@ -275,14 +280,20 @@ def measure_onnx_policy(source: str | Path | TrainedPolicy, folder: str | Path, 
             done = terminated or truncated
     finally:
         env.close()
-    onnx_actions, _ = onnx_policy.predict(np.asarray(observations))
+    inputs = np.asarray(observations)
+    if policy.history is not None:  # the network's inputs: the flight's observations through a fresh history
+        from agents.history import ObservationHistory
+
+        history = ObservationHistory(policy.history.settings)
+        inputs = np.vstack([history(row[None], np.array([k == 0]))[0] for k, row in enumerate(inputs)])
+    onnx_actions, _ = onnx_policy.predict(inputs)
     return {
         "agent": str(policy.path or source),
         "env": scenario.env_id,
         "env_kwargs": scenario.make_kwargs(),
         "seed": seed,
         "steps": len(observations),
-        "onnx_step_ms": solve_time_stats(time_onnx_steps(onnx_policy, np.asarray(observations)).tolist()),
+        "onnx_step_ms": solve_time_stats(time_onnx_steps(onnx_policy, inputs).tolist()),
         "python_predict_ms": solve_time_stats(seconds),
         "max_action_difference": float(np.max(np.abs(onnx_actions - np.asarray(actions)))),
         "targets": TARGETS,

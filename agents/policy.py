@@ -49,6 +49,11 @@ class TrainedPolicy:
     env's vehicle, zero body rates) for that row instead of a network output, increments
     :attr:`failures`, records the reason in :attr:`failure_log` and issues a
     ``RuntimeWarning``, as the controllers do; the action is never NaN.
+
+    An agent trained with an observation history (``policy.json``'s ``history``,
+    :mod:`agents.history`) takes the env's observations and keeps the history itself, one
+    memory per batch row, begun afresh where ``episode_start`` says so or, when it is not
+    given, where the observation's time goes back (a reset), as the controllers do.
     """
 
     def __init__(self, model: Any, vec_normalize: Any, info: dict[str, Any], path: Path | None = None):
@@ -61,6 +66,38 @@ class TrainedPolicy:
         self.action_space = model.action_space
         self.failures = 0
         self.failure_log: list[str] = []
+        self.history: Any = None
+        if info.get("history"):
+            from agents.history import HistorySettings, ObservationHistory
+
+            self.history = ObservationHistory(HistorySettings.from_spec(info["history"]))
+            self._last_time = np.zeros(0)
+            self._restart = np.zeros(0, dtype=bool)
+
+    @property
+    def observation_size(self) -> int:
+        """Entries of the observation ``predict`` takes (the env's; the network may take more, with a history)."""
+        from wall_env.observation import OBSERVATION_SIZE
+
+        return OBSERVATION_SIZE if self.history is not None else int(self.observation_space.shape[0])
+
+    def _remember(self, obs: np.ndarray, episode_start: Any) -> np.ndarray:
+        """The network's inputs for env observations ``(n, 48)``, through the per-row history."""
+        from wall_env.observation import OBSERVATION_FIELDS
+
+        n = obs.shape[0]
+        if self._last_time.shape[0] != n:
+            self._last_time = np.full(n, -np.inf)
+            self._restart = np.ones(n, dtype=bool)
+        times = obs[:, OBSERVATION_FIELDS["time"].start].astype(float)
+        starts = self._restart | (times < self._last_time)  # time going back: a reset (NaN compares false)
+        if episode_start is not None:
+            starts |= np.broadcast_to(np.asarray(episode_start, dtype=bool).reshape(-1), (n,))
+        finite = np.all(np.isfinite(obs), axis=1)
+        self._restart = ~finite  # a row that broke begins afresh at its next finite observation
+        np.copyto(self._last_time, times, where=np.isfinite(times))
+        clean = np.where(finite[:, None], obs, 0.0).astype(np.float32)
+        return self.history(clean, starts)
 
     def normalize(self, observation: np.ndarray) -> np.ndarray:
         """The observation as the network sees it (float32, normalised and clipped)."""
@@ -76,15 +113,17 @@ class TrainedPolicy:
             obs = np.asarray(observation, dtype=np.float32)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"observation must be an array of numbers, got {type(observation).__name__} ({exc})") from None
-        expected = self.observation_space.shape[0]
+        expected = self.observation_size
         if obs.shape[-1:] != (expected,) or obs.ndim > 2:
             raise ValueError(f"observation must have shape ({expected},) or (n, {expected}), got {obs.shape}")
         bad = ~np.all(np.isfinite(obs), axis=-1)
+        inputs = obs if self.history is None else self._remember(obs.reshape(-1, expected), episode_start).reshape(
+            *obs.shape[:-1], -1)
         if not np.any(bad):
-            actions, state = self.model.predict(self.normalize(obs), state=state, episode_start=episode_start,
+            actions, state = self.model.predict(self.normalize(inputs), state=state, episode_start=episode_start,
                                                 deterministic=deterministic)
             return actions, state
-        batch = obs.reshape(-1, expected)
+        batch = inputs.reshape(-1, inputs.shape[-1])
         bad_rows = np.atleast_1d(bad)
         actions = np.zeros((len(batch), *self.action_space.shape), dtype=np.float32)
         good = ~bad_rows

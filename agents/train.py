@@ -223,22 +223,30 @@ def policy_description(config: dict[str, Any]) -> dict[str, Any]:
         residual = {"base": config["residual"], "scale": [float(s) for s in config["residual_scale"]],
                     "base_kwargs": base_controller_kwargs(config, config["residual"])}
     algorithm = "PPO" if config.get("algo", "ppo") == "ppo" else f"DAgger (teacher: {config['teacher']['controller']})"
-    return {"env_id": config["env_id"], "algorithm": algorithm, "residual": residual}
+    from agents.envs import history_settings
+
+    history = history_settings(config)
+    return {"env_id": config["env_id"], "algorithm": algorithm, "residual": residual,
+            "history": None if history.trivial else history.to_dict()}
 
 
 def check_observations(config: dict[str, Any], n: int = 8, seed: int = 12345) -> np.ndarray:
-    """A few raw observations from one short flight (zero actions) for the save/load check."""
-    from agents.envs import make_env
+    """A few of the network's inputs from one short flight (zero actions) for the save/load check: raw
+    observations, through the configuration's observation history if it has one."""
+    from agents.envs import history_settings, make_env
+    from agents.history import ObservationHistory
 
+    history = ObservationHistory(history_settings(config))
     env = make_env(config, randomize=False, monitor=False)
     try:
         obs, _ = env.reset(seed=seed)
-        out = [obs]
+        out = [history(obs[None], np.array([True]))[0]]
         for _ in range(n * 5):
             obs, _, terminated, truncated, _ = env.step(np.zeros(4, dtype=np.float32))
-            out.append(obs)
+            out.append(history(obs[None], np.array([False]))[0])
             if terminated or truncated:
                 obs, _ = env.reset()
+                history(obs[None], np.array([True]))
         return np.asarray(out[:: 5][:n], dtype=np.float32)
     finally:
         env.close()

@@ -59,3 +59,38 @@ def test_the_wrapper_gives_an_ended_episode_its_own_last_inputs():
     assert dones[0] and infos[0]["terminal_observation"].shape == (2 * 48 + 3,)
     # the new episode starts its own memory: both frames are its first observation
     assert np.array_equal(features[0, :48], features[0, 48:96])
+
+
+def test_an_agent_trained_with_a_history_loads_flies_and_exports_with_it(tmp_path):
+    import gymnasium as gym
+
+    import agents
+    import wall_env  # noqa: F401
+    from wall_inspector.cli import main as cli_main
+
+    out = tmp_path / "run"
+    code = cli_main(["train", "--env", "WallHover-v0", "--timesteps", "4096", "--n-envs", "8", "--seed", "2",
+                     "--set", "ppo.n_steps=256", "--set", "ppo.batch_size=512", "--set", "ppo.n_epochs=1",
+                     "--set", "card_eval.episodes=1", "--eval-episodes", "1", "--eval-freq", "100000",
+                     "--set", "history.frames=3", "--set", "history.stride=2", "--set", "history.integral_time=0.5",
+                     "--no-progress", "--quiet", "--out", str(out)])
+    assert code == 0
+    policy = agents.load_policy(out)  # verify=True: the recorded check inputs give the recorded actions
+    assert policy.history is not None and policy.observation_size == 48
+    assert policy.model.observation_space.shape == (3 * 48 + 3,)
+    envs = gym.make_vec("WallInspector/WallHover-v0", num_envs=3, vectorization_mode="vector_entry_point")
+    obs, _ = envs.reset(seed=[1, 2, 3])
+    reference = ObservationHistory(policy.history.settings)  # the memory the agent keeps, kept by hand
+    last_time = np.full(3, np.inf)
+    for _ in range(60):
+        actions, _ = policy.predict(obs)  # no episode_start: a reset shows as the time going back
+        features = reference(obs, obs[:, 47] < last_time)
+        last_time = obs[:, 47].copy()
+        expected, _ = policy.model.predict(policy.normalize(features), deterministic=True)
+        np.testing.assert_allclose(actions, expected, atol=1e-7)
+        obs, *_ = envs.step(actions)
+
+    from agents.export import OnnxPolicy, export_onnx
+
+    onnx = OnnxPolicy(export_onnx(out, tmp_path / "policy.onnx"))
+    assert onnx.observation_size == 3 * 48 + 3 and '"frames": 3' in onnx.metadata["history"]
