@@ -47,7 +47,6 @@ import json
 import os
 import platform
 import shlex
-import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -258,20 +257,10 @@ _TRACKED = ("agents", "wall_env", "controllers")  # the code a trained agent dep
 def git_state() -> dict[str, Any] | None:
     """``{"commit": sha, "uncommitted": [files]}`` of the code in ``agents/``, ``wall_env/``
     and ``controllers/`` (the files that differ from the commit, shipped agents excluded),
-    or ``None`` outside a git checkout."""
-    try:
-        root = Path(__file__).resolve().parent.parent
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
-        if commit.returncode != 0:
-            return None
-        status = subprocess.run(["git", "status", "--porcelain", "--", *_TRACKED, ":!agents/pretrained"], cwd=root,
-                                capture_output=True, text=True, timeout=10)
-        if status.returncode != 0:
-            return None
-        files = sorted(line[3:] for line in status.stdout.splitlines() if line.strip())
-        return {"commit": commit.stdout.strip(), "uncommitted": files}
-    except (OSError, subprocess.SubprocessError):
-        return None
+    or ``None`` outside a git checkout (:func:`wall_env.provenance.git_state`)."""
+    from wall_env.provenance import git_state as state
+
+    return state(_TRACKED, exclude=("agents/pretrained",))
 
 
 def _latest_checkpoint(run_dir: Path) -> Path:

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -41,8 +40,9 @@ from controllers.tuning.objective import (
     TrackingObjective,
 )
 from controllers.tuning.space import SearchSpace
+from wall_env.provenance import git_commit
 
-__all__ = ["Tuner", "TuningResult", "build_policy", "git_commit"]
+__all__ = ["Tuner", "TuningResult", "build_policy"]
 
 _STUDY_NAME = "tune"
 
@@ -64,19 +64,6 @@ def build_policy(method: str, settings: dict[str, Any], env: Any):
         return MPC.from_env(env, preset=None, **kwargs)
     suction = {k: settings[k] for k in ("k_s", "d_thr") if k in settings}
     return SCMPC.from_env(env, preset=None, **suction, **kwargs)
-
-
-def git_commit() -> str:
-    """The checked-out commit, with ``+uncommitted`` if the tree has changes (``unknown`` outside git)."""
-    root = Path(__file__).resolve().parents[2]
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
-                                check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                               capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-    return commit + ("+uncommitted" if dirty else "")
 
 
 @dataclass
