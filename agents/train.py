@@ -278,7 +278,8 @@ def _latest_checkpoint(run_dir: Path) -> Path:
     return Path(max(candidates)[1])
 
 
-def _make_ppo(config: dict[str, Any], env: Any, tb_dir: Path, verbose: int) -> Any:
+def make_ppo(config: dict[str, Any], env: Any, tb_dir: Path | None, verbose: int = 0) -> Any:
+    """The configuration's learner (:class:`agents.lean_ppo.LeanPPO`) on ``env``; TensorBoard logs into ``tb_dir``."""
     import torch
     from stable_baselines3.common.utils import LinearSchedule
 
@@ -296,7 +297,8 @@ def _make_ppo(config: dict[str, Any], env: Any, tb_dir: Path, verbose: int) -> A
     ppo["adaptive_kl"] = ppo.pop("adaptive_kl")
     if final is not None:  # progress runs over the planned timesteps, resumed runs included
         ppo["learning_rate"] = LinearSchedule(float(ppo["learning_rate"]), float(final), 1.0)
-    return LeanPPO("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=config["seed"], tensorboard_log=str(tb_dir),
+    return LeanPPO("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=config["seed"],
+               tensorboard_log=None if tb_dir is None else str(tb_dir),
                device="cpu", verbose=verbose, **ppo)
 
 
@@ -401,7 +403,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
             model.tensorboard_log = str(out / "tb")
             print(f"resuming from {source} at {start_steps} timesteps", file=sys.stderr)
         else:
-            model = _make_ppo(config, train_env, out / "tb", verbose)
+            model = make_ppo(config, train_env, out / "tb", verbose)
             if config["warm_start"]["controller"]:
                 warm = warm_start_from_controller(config, model, train_env, verbose=verbose)
 

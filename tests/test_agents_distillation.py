@@ -15,7 +15,7 @@ from agents.config import default_config, validate_config
 from agents.demonstrations import record_demonstrations
 from agents.distillation import distil
 from agents.residual import make_base_controller
-from agents.train import _make_ppo
+from agents.train import make_ppo as _make_ppo
 from controllers.threads import limit_threads
 from wall_inspector.cli import main
 

@@ -25,7 +25,7 @@ INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("wall_inspector.demo", "fly a short rollout near a wall, print what happened and write a picture"),
     "bench-env": ("wall_env.benchmark", "measure environment steps per second and reset time"),
-    "bench-mpc": ("controllers.benchmark", "time SC-MPC solves in closed loop against IPOPT on the same problems"),
+    "bench-mpc": ("wall_inspector.bench_mpc", "time SC-MPC solves in closed loop against IPOPT on the same problems"),
     "compare": ("wall_inspector.compare", "reproduce the paper's Tables I and II with PID, MPC and SC-MPC (tables, JSON, plots)"),
     "robustness": ("wall_inspector.robustness", "fly every method, told only the nominal model, over a grid of true worlds "
                                                 "(suction, pushes, gusts, latency, sensing, motor lag)"),
@@ -33,6 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tune": ("wall_inspector.tune", "tune a controller's gains or weights on a task within a budget (Optuna), write a preset"),
     "train": ("wall_inspector.train", "train a PPO agent on a wall task (checkpoints, TensorBoard, model card; --ray: many runs)"),
     "bench-train": ("wall_inspector.bench_train", "time training to the target over several seeds, and its speed beside a busy core"),
+    "bench-throughput": ("wall_inspector.bench_throughput", "training env steps per second for several vector-env layouts"),
     "notebooks": ("wall_inspector.notebooks", "run the notebooks top to bottom (and save their outputs)"),
     "readme": ("wall_inspector.readme", "copy result tables written by other commands into README.md"),
     "import-log": ("discovery.import_log", "convert a PX4 ULog or a ROS 2 bag into the project's flight log (CSV + JSON)"),
