@@ -284,7 +284,7 @@ def measure_onnx_policy(source: str | Path | TrainedPolicy, folder: str | Path, 
     if policy.history is not None:  # the network's inputs: the flight's observations through a fresh history
         from agents.history import ObservationHistory
 
-        history = ObservationHistory(policy.history.settings)
+        history = ObservationHistory(policy.history.settings, policy.history.observation_size)
         inputs = np.vstack([history(row[None], np.array([k == 0]))[0] for k, row in enumerate(inputs)])
     onnx_actions, _ = onnx_policy.predict(inputs)
     return {

@@ -73,7 +73,17 @@ class HistorySettings:
 
     @property
     def size(self) -> int:
-        return self.frames * OBSERVATION_SIZE + (3 if self.integral_time > 0 else 0)
+        """The network's inputs for the env's observation (:data:`OBSERVATION_SIZE` entries)."""
+        return self.input_size(OBSERVATION_SIZE)
+
+    def input_size(self, observation_size: int) -> int:
+        """The network's inputs for observations of ``observation_size`` entries (a residual agent's
+        observation carries its base controller's command too)."""
+        return self.frames * observation_size + (3 if self.integral_time > 0 else 0)
+
+    def observation_size(self, input_size: int) -> int:
+        """The observation width that gives a network of ``input_size`` inputs (inverse of :meth:`input_size`)."""
+        return (input_size - (3 if self.integral_time > 0 else 0)) // self.frames
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -82,17 +92,18 @@ class HistorySettings:
 class ObservationHistory:
     """The per-row memory of :class:`HistorySettings` for a batch of ``n`` rows (resized on demand)."""
 
-    def __init__(self, settings: HistorySettings):
+    def __init__(self, settings: HistorySettings, observation_size: int = OBSERVATION_SIZE):
         self.settings = settings
+        self.observation_size = int(observation_size)
         self._span = (settings.frames - 1) * settings.stride + 1  # observations kept per row
         self._decay = math.exp(-settings.control_dt / settings.integral_time) if settings.integral_time > 0 else 0.0
         self._picks = np.arange(0, self._span, settings.stride)  # oldest kept .. newest
-        self._buffer = np.zeros((0, self._span, OBSERVATION_SIZE), dtype=np.float32)
+        self._buffer = np.zeros((0, self._span, self.observation_size), dtype=np.float32)
         self._integral = np.zeros((0, 3))
 
     def _resize(self, n: int) -> None:
         if self._buffer.shape[0] != n:
-            self._buffer = np.zeros((n, self._span, OBSERVATION_SIZE), dtype=np.float32)
+            self._buffer = np.zeros((n, self._span, self.observation_size), dtype=np.float32)
             self._integral = np.zeros((n, 3))
 
     def start(self, rows: np.ndarray, observations: np.ndarray) -> None:
@@ -104,6 +115,8 @@ class ObservationHistory:
         """The agent's inputs ``(n, size)`` for the env's observations ``(n, 48)``; rows marked in
         ``episode_start`` (or every row, the first time) begin a new memory."""
         obs = np.asarray(observations, dtype=np.float32)
+        if obs.ndim != 2 or obs.shape[1] != self.observation_size:
+            raise ValueError(f"observations must have shape (n, {self.observation_size}), got {obs.shape}")
         n = obs.shape[0]
         fresh = self._buffer.shape[0] != n
         self._resize(n)
@@ -128,8 +141,9 @@ class VecObservationHistory(VecEnvWrapper):
     """A Stable-Baselines3 vector env whose observations are :class:`ObservationHistory`'s inputs."""
 
     def __init__(self, venv: VecEnv, settings: HistorySettings):
-        self.history = ObservationHistory(settings)
-        size = settings.size
+        width = int(venv.observation_space.shape[0])
+        self.history = ObservationHistory(settings, width)
+        size = settings.input_size(width)
         space = spaces.Box(-np.inf, np.inf, shape=(size,), dtype=np.float32)
         super().__init__(venv, observation_space=space)
         self._ended = np.ones(venv.num_envs, dtype=bool)
@@ -154,7 +168,7 @@ class VecObservationHistory(VecEnvWrapper):
         """The inputs the ended episode's last observation would have given (its memory, one more step)."""
         saved = (self.history._buffer[row].copy(), self.history._integral[row].copy())
         buffer, integral = saved
-        single = ObservationHistory(self.history.settings)
+        single = ObservationHistory(self.history.settings, self.history.observation_size)
         single._resize(1)
         single._buffer[0], single._integral[0] = buffer, integral
         return single(np.asarray(terminal, dtype=np.float32)[None, :], np.zeros(1, dtype=bool))[0]

@@ -70,16 +70,18 @@ class TrainedPolicy:
         if info.get("history"):
             from agents.history import HistorySettings, ObservationHistory
 
-            self.history = ObservationHistory(HistorySettings.from_spec(info["history"]))
+            settings = HistorySettings.from_spec(info["history"])
+            width = settings.observation_size(int(self.observation_space.shape[0]))
+            self.history = ObservationHistory(settings, width)
             self._last_time = np.zeros(0)
             self._restart = np.zeros(0, dtype=bool)
 
     @property
     def observation_size(self) -> int:
         """Entries of the observation ``predict`` takes (the env's; the network may take more, with a history)."""
-        from wall_env.observation import OBSERVATION_SIZE
-
-        return OBSERVATION_SIZE if self.history is not None else int(self.observation_space.shape[0])
+        if self.history is not None:
+            return self.history.observation_size
+        return int(self.observation_space.shape[0])
 
     def _remember(self, obs: np.ndarray, episode_start: Any) -> np.ndarray:
         """The network's inputs for env observations ``(n, 48)``, through the per-row history."""

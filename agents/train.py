@@ -1,16 +1,9 @@
-"""``wall-inspector train``: PPO (Stable-Baselines3, PyTorch) on a Wall Inspector task.
+"""Training an agent on a Wall Inspector task: PPO (Stable-Baselines3, PyTorch), or a distilled controller.
 
-::
-
-    wall-inspector train --env WallInspector/WallSweep-v0 --timesteps 3000000 \\
-        --n-envs 16 --seed 0 --out runs/sweep
-    wall-inspector train --resume runs/sweep --timesteps 4000000     # continue to 4M steps
-    wall-inspector train --env WallHover-v0 --residual pid --randomize --out runs/hover_res
-
+:func:`train` is a whole run (``wall-inspector train`` reads its options, :mod:`wall_inspector.train`).
 What a run does:
 
-* hyperparameters from ``agents/configs/<task>.yaml`` (or ``--config FILE``), changed by
-  the flags and ``--set key=value``; the result is saved as ``OUT/config.yaml``;
+* the configuration (:mod:`agents.config`) is saved as ``OUT/config.yaml``;
 * ``n_envs`` environments in ``n_workers`` processes
   (:class:`~agents.vec_env.MultiEnvSubprocVecEnv`), under ``VecNormalize`` (observations
   and rewards), stepped by PPO;
@@ -28,13 +21,10 @@ PPO learns from whole rollouts of ``n_envs * ppo.n_steps`` env steps, so a run t
 the most whole rollouts that fit in ``--timesteps`` (never more steps than asked for).
 
 Ctrl-C (``SIGINT``) stops a run cleanly: the model, its normalisation statistics and the
-step count are saved into ``OUT/checkpoints/<steps>/`` and the command prints how to go
-on; ``--resume OUT`` continues from the latest checkpoint with the same step count.
-Checkpoints are also written every ``checkpoint_freq`` env steps and every
+step count are saved into ``OUT/checkpoints/<steps>/`` (:class:`TrainingInterrupted` says
+where); ``train(..., resume=True)`` continues from the latest checkpoint with the same step
+count. Checkpoints are also written every ``checkpoint_freq`` env steps and every
 ``checkpoint_minutes`` of wall time.
-
-Every argument is checked before the run folder or any worker process exists; a bad one
-stops the command with a one-line message.
 
 Throughput is total env steps of the run divided by its wall time, PPO updates,
 evaluations and checkpoints included.
@@ -42,11 +32,9 @@ evaluations and checkpoints included.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
-import shlex
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -58,24 +46,16 @@ from typing import Any
 import numpy as np
 
 from agents.config import (
-    apply_overrides,
     base_controller_kwargs,
-    default_config,
-    load_config,
     save_config,
-    task_env_id,
-    validate_config,
 )
-from wall_env.validation import check_output_folder
 
 __all__ = [
     "TrainingInterrupted",
     "TrainingRun",
-    "add_arguments",
     "check_observations",
     "planned_timesteps",
     "policy_description",
-    "run",
     "train",
 ]
 
@@ -88,75 +68,6 @@ class TrainingInterrupted(KeyboardInterrupt):
     def __init__(self, run_dir: Path, checkpoint: Path, num_timesteps: int):
         super().__init__(f"interrupted at {num_timesteps} env steps; saved in {checkpoint}")
         self.run_dir, self.checkpoint, self.num_timesteps = run_dir, checkpoint, num_timesteps
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--env", help="task, e.g. WallInspector/WallSweep-v0 (or WallSweep-v0, wall_sweep)")
-    parser.add_argument("--algo", choices=["ppo", "dagger"],
-                        help="ppo: PPO learns the task from its reward alone (default); dagger: a controller (teacher.controller, "
-                             "SC-MPC) is distilled into the network, DAgger-style (settings: teacher.* in the config)")
-    parser.add_argument("--timesteps", type=int, help="total env steps (default: the task's config)")
-    parser.add_argument("--n-envs", type=int, help="environments in the vector env (default: config, 32)")
-    parser.add_argument("--workers", type=int, help="worker processes running them with --vector subprocess "
-                                                    "(default: config, 2)")
-    parser.add_argument("--vector", choices=["batched", "subprocess"],
-                        help="batched: all envs in one batched env in this process (default); subprocess: single envs "
-                             "in --workers processes")
-    parser.add_argument("--seed", type=int, help="random seed (default: config, 0)")
-    parser.add_argument("--out", help="run folder for checkpoints, logs and the model card")
-    parser.add_argument("--config", help="YAML configuration instead of agents/configs/<task>.yaml")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a configuration entry, e.g. --set ppo.n_steps=128 (repeatable)")
-    parser.add_argument("--randomize", action=argparse.BooleanOptionalAction, default=None,
-                        help="domain randomisation of k_s, d_thr, stand-off and mass (ranges from the config)")
-    parser.add_argument("--residual", choices=["none", "pid", "scmpc"],
-                        help="learn a correction on top of this base controller (default: config, none)")
-    parser.add_argument("--warm-start", choices=["none", "pid", "scmpc"],
-                        help="before PPO, clone this controller's demonstrations into the policy (behaviour cloning; "
-                             "settings: warm_start.* in the config; default: config, none)")
-    parser.add_argument("--eval-freq", type=int, help="env steps between evaluations (default: config)")
-    parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: config)")
-    parser.add_argument("--checkpoint-freq", type=int, help="env steps between checkpoints, 0 = none (default: config)")
-    parser.add_argument("--checkpoint-minutes", type=float,
-                        help="wall-clock minutes between checkpoints as well, 0 = none (default: config, 10)")
-    parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its latest checkpoint")
-    parser.add_argument("--ship", action="store_true",
-                        help="copy the best checkpoint and its model card into agents/pretrained/<task>/")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument("--quiet", action="store_true", help="no PPO log table on the terminal")
-
-
-# ---------------------------------------------------------------------- configuration from flags
-def _config_from_args(args: argparse.Namespace) -> dict[str, Any]:
-    if args.config:
-        config = load_config(args.config, validate=False)
-        if args.env:
-            config["env_id"] = task_env_id(args.env)
-        if not config.get("env_id"):
-            raise ValueError("--env is needed when the configuration file names no env_id")
-    else:
-        if not args.env:
-            raise ValueError("--env is required (e.g. --env WallInspector/WallSweep-v0)")
-        config = default_config(args.env)
-    flags = {
-        "timesteps": args.timesteps, "n_envs": args.n_envs, "n_workers": args.workers, "seed": args.seed,
-        "vector": args.vector, "algo": args.algo,
-        "randomize": args.randomize, "checkpoint_freq": args.checkpoint_freq,
-        "checkpoint_minutes": args.checkpoint_minutes,
-        "residual": None if args.residual == "none" else args.residual,
-    }
-    for key, value in flags.items():
-        if value is not None or (key == "residual" and args.residual == "none"):
-            config[key] = value
-    if args.warm_start is not None:
-        config["warm_start"]["controller"] = None if args.warm_start == "none" else args.warm_start
-    if args.eval_freq is not None:
-        config["eval"]["freq"] = args.eval_freq
-    if args.eval_episodes is not None:
-        config["eval"]["episodes"] = args.eval_episodes
-    if args.workers is None and isinstance(config["n_envs"], int) and 0 < config["n_envs"] < config["n_workers"]:
-        config["n_workers"] = config["n_envs"]
-    return apply_overrides(config, args.set)
 
 
 def planned_timesteps(config: dict[str, Any], start: int = 0) -> int:
@@ -175,37 +86,6 @@ def planned_timesteps(config: dict[str, Any], start: int = 0) -> int:
                          + (f" after the {start} steps already trained" if start else "")
                          + f"; ask for at least {int(start) + rollout}")
     return int(start) + rollouts * rollout
-
-
-def _command(args: argparse.Namespace, config: dict[str, Any]) -> str:
-    """The command that repeats this run, every setting that matters spelled out."""
-    if args.resume:
-        parts = ["wall-inspector", "train", "--resume", args.resume, "--timesteps", str(config["timesteps"])]
-    else:
-        parts = ["wall-inspector", "train", "--env", config["env_id"], "--algo", config["algo"],
-                 "--timesteps", str(config["timesteps"]),
-                 "--n-envs", str(config["n_envs"]), "--vector", config["vector"], "--workers", str(config["n_workers"]),
-                 "--seed", str(config["seed"]), "--out", str(args.out)]
-        if args.config:
-            parts += ["--config", args.config]
-        parts.append("--randomize" if config["randomize"] else "--no-randomize")  # explicit: some tasks default to on
-        if config["residual"]:
-            parts += ["--residual", config["residual"]]
-        if config["warm_start"]["controller"]:
-            parts += ["--warm-start", config["warm_start"]["controller"]]
-        if args.eval_freq is not None:
-            parts += ["--eval-freq", str(args.eval_freq)]
-        if args.eval_episodes is not None:
-            parts += ["--eval-episodes", str(args.eval_episodes)]
-        if args.checkpoint_freq is not None:
-            parts += ["--checkpoint-freq", str(args.checkpoint_freq)]
-        if args.checkpoint_minutes is not None:
-            parts += ["--checkpoint-minutes", str(args.checkpoint_minutes)]
-        for item in args.set:
-            parts += ["--set", item]
-        if args.ship:
-            parts.append("--ship")
-    return shlex.join(parts)
 
 
 # ---------------------------------------------------------------------- pieces of a run
@@ -235,8 +115,8 @@ def check_observations(config: dict[str, Any], n: int = 8, seed: int = 12345) ->
     from agents.envs import history_settings, make_env
     from agents.history import ObservationHistory
 
-    history = ObservationHistory(history_settings(config))
     env = make_env(config, randomize=False, monitor=False)
+    history = ObservationHistory(history_settings(config), int(env.observation_space.shape[0]))
     try:
         obs, _ = env.reset(seed=seed)
         out = [history(obs[None], np.array([True]))[0]]
@@ -401,7 +281,6 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
             train_env.obs_rms, train_env.ret_rms = saved_normalizer.obs_rms, saved_normalizer.ret_rms
             model.set_env(train_env)
             model.tensorboard_log = str(out / "tb")
-            print(f"resuming from {source} at {start_steps} timesteps", file=sys.stderr)
         else:
             model = make_ppo(config, train_env, out / "tb", verbose)
             if config["warm_start"]["controller"]:
@@ -628,94 +507,3 @@ def ship(run_dir: Path, task: str, residual: str | None = None, warm_start: str 
     for name in ("model_card.json", "model_card.md"):
         (target / name).write_bytes((run_dir / name).read_bytes())
     return target
-
-
-def _usage(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
-    """The configuration and run folder the arguments ask for; ``ValueError`` for anything
-    unusable, before any folder or process exists."""
-    config, out = _resumed_run(args) if args.resume else _new_run(args)
-    if args.ship:
-        git = git_state()
-        if git is not None and git["uncommitted"]:
-            raise ValueError(f"--ship records the git commit in the model card, but {', '.join(git['uncommitted'])} "
-                             "differ from it; commit first (or train without --ship and ship a clean run)")
-    return config, out
-
-
-def _resumed_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
-    """The saved configuration of ``--resume DIR``, with the flags a resumed run may change."""
-    run_dir = Path(args.resume)
-    if not (run_dir / "config.yaml").is_file():
-        raise ValueError(f"cannot resume: {run_dir / 'config.yaml'} does not exist")
-    changing = [flag for flag, value in (("--env", args.env), ("--config", args.config), ("--n-envs", args.n_envs),
-                                         ("--algo", args.algo),
-                                         ("--seed", args.seed), ("--randomize", args.randomize),
-                                         ("--residual", args.residual), ("--warm-start", args.warm_start),
-                                         ("--set", args.set or None),
-                                         ("--out", args.out)) if value is not None]
-    if changing:
-        raise ValueError(f"--resume continues the saved configuration; drop {', '.join(changing)}")
-    config = load_config(run_dir / "config.yaml", validate=False)
-    if config.get("algo") == "dagger":
-        raise ValueError(f"{run_dir} holds a distilled agent (algo dagger): it has no PPO steps to continue; "
-                         "train a new run")
-    for key, value in (("timesteps", args.timesteps), ("n_workers", args.workers),
-                       ("checkpoint_freq", args.checkpoint_freq), ("checkpoint_minutes", args.checkpoint_minutes)):
-        if value is not None:
-            config[key] = value
-    validate_config(config)
-    from agents.checkpoints import read_json
-
-    start = _latest_checkpoint(run_dir)
-    planned_timesteps(config, int(read_json(start / "policy.json").get("num_timesteps", 0)))
-    return config, run_dir
-
-
-def _new_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
-    """The configuration of a new run from the flags, and its (creatable) folder."""
-    if not args.out:
-        raise ValueError("--out is required (the run folder)")
-    out = Path(args.out)
-    if (out / "config.yaml").exists():
-        raise ValueError(f"{out} already holds a run; continue it with --resume {out} or choose another --out")
-    config = _config_from_args(args)
-    planned_timesteps(config)
-    check_output_folder(out, "--out")
-    return config, out
-
-
-def run(args: argparse.Namespace) -> int:
-    try:
-        config, out = _usage(args)
-        checks = check_observations(config)  # builds the env once: settings it refuses stop the command here
-        if config["randomize"]:  # and once with the randomisation ranges
-            from agents.envs import make_env
-
-            make_env(config, monitor=False).close()
-    except (ValueError, FileNotFoundError) as exc:
-        raise SystemExit(str(exc)) from None
-    planned = planned_timesteps(config) if not args.resume else None
-    if planned is not None and planned < config["timesteps"]:
-        rollout = config["n_envs"] * config["ppo"]["n_steps"]
-        print(f"training {planned // rollout} whole PPO rollouts of {rollout} env steps = {planned} of the "
-              f"{config['timesteps']} requested", file=sys.stderr)
-    try:
-        result = train(config, out, resume=bool(args.resume), progress_bar=not args.no_progress,
-                       verbose=0 if args.quiet else 1, command=_command(args, config), checks=checks)
-    except TrainingInterrupted as stop:
-        print(f"\ninterrupted at {stop.num_timesteps} env steps: model, normalisation statistics and step count saved "
-              f"in {stop.checkpoint}; continue with: wall-inspector train --resume {shlex.quote(str(stop.run_dir))} "
-              f"--timesteps {config['timesteps']}", file=sys.stderr)
-        return 130
-    card = result.card
-    t, m = card["training"], card["evaluation"]["metrics"]
-    print(f"trained {t['timesteps_this_run']} steps in {t['wall_time_s']:.0f} s ({t['steps_per_s']:.0f} env steps/s); "
-          f"best checkpoint: return {m['mean_return']:.1f}, completed {m['completed']:.0%}, "
-          f"position RMSE {100 * m['position_rmse_m']:.2f} cm, wall-normal RMSE {100 * m['wall_normal_rmse_m']:.2f} cm, "
-          f"collisions {m['collisions']}")
-    print(f"model card: {out / 'model_card.md'}")
-    if args.ship:
-        target = ship(out, config["env_id"], config["residual"], config["warm_start"]["controller"],
-                      config["teacher"]["controller"] if config["algo"] == "dagger" else None)
-        print(f"shipped to {target}")
-    return 0

@@ -56,6 +56,8 @@ class RunLock:
     def acquire(self) -> RunLock:
         import fcntl
 
+        if self._fd is not None:
+            return self  # already held by this object (``with lock_run_folder(...)`` enters an acquired lock)
         self.folder.mkdir(parents=True, exist_ok=True)
         fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         try:

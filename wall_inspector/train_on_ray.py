@@ -73,6 +73,7 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
     from agents import train as agents_train
     from agents.config import apply_overrides
     from wall_env.validation import check_output_folder
+    from wall_inspector.train import _command, _config_from_args
     from wall_inspector.tune import parse_seeds
 
     if not args.out:
@@ -90,7 +91,7 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
     check_output_folder(out, "--out")
     seeds = [[f"seed={s}"] for s in parse_seeds(args.seeds, "--seeds")] if args.seeds else [[]]
     points = _sweep_points(args.sweep) if args.sweep else [[]]
-    base = agents_train._config_from_args(args)
+    base = _config_from_args(args)
     runs = []
     for seed_items, point in itertools.product(seeds, points):
         items = point + seed_items
@@ -100,7 +101,7 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
         single = copy.copy(args)
         single.set, single.out, single.seed = list(args.set) + items, str(out / name), None
         runs.append({"name": name, "set": items, "config": config,
-                     "command": agents_train._command(single, config)})
+                     "command": _command(single, config)})
     names = [r["name"] for r in runs]
     if len(set(names)) != len(names):
         raise ValueError("--seeds and --sweep name the same run twice")
