@@ -100,9 +100,14 @@ def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
 PENETRATION = 0.02  # m beyond a surface before a sample counts as through it
 
 
-def scene_problems(regressors: list, times: np.ndarray) -> list[str]:
-    """Likely sidecar errors: rotors through a wall, the ground or the ceiling, with the fix to make."""
-    out = []
+def scene_problems(regressors: list, times: np.ndarray) -> list[dict]:
+    """Likely sidecar errors: rotors through a wall, the ground or the ceiling, with the fix to make.
+
+    Each is ``{"message", "surface", "effects", "wall", "reversed"}``: the warning, the surface (``wall``,
+    ``ground``, ``ceiling``), the effects that act against it, the wall's index (walls only) and whether
+    the flight is behind the wall most of the time (its normal points into the wall: the fix is certain).
+    """
+    out: list[dict] = []
     dt = float(np.median(np.diff(times))) if len(times) > 1 else 0.0
     for reg in regressors:
         v = reg.values
@@ -119,13 +124,16 @@ def scene_problems(regressors: list, times: np.ndarray) -> list[str]:
                    "from the wall, into free space)" if most > 0.5 else
                    f"move scene.walls[{k}].point at least {-deepest:.2f} m back along the normal, or check the "
                    "log's frame")
-            out.append(f"likely sidecar error: the rotors are behind wall {k} (down to {deepest:.2f} m) for "
-                       f"{seconds:.1f} s, which a vehicle cannot be; {fix}")
+            out.append({"message": f"likely sidecar error: the rotors are behind wall {k} (down to {deepest:.2f} m) "
+                                   f"for {seconds:.1f} s, which a vehicle cannot be; {fix}",
+                        "surface": "wall", "wall": int(k), "reversed": most > 0.5, "effects": ["wall_suction"]})
         elif reg.name == "height above ground":
-            out.append(f"likely sidecar error: the rotors are below the ground (down to {deepest:.2f} m under "
-                       f"ground_z) for {seconds:.1f} s; lower scene.ground_z by at least {-deepest:.2f} m, or the "
-                       "position estimate drifted (check the log's altitude source)")
+            out.append({"message": f"likely sidecar error: the rotors are below the ground (down to {deepest:.2f} m "
+                                   f"under ground_z) for {seconds:.1f} s; lower scene.ground_z by at least "
+                                   f"{-deepest:.2f} m, or the position estimate drifted (check the log's altitude "
+                                   "source)", "surface": "ground", "reversed": False, "effects": ["ground_effect"]})
         elif reg.name == "distance to ceiling":
-            out.append(f"likely sidecar error: the rotors are above the ceiling (by up to {-deepest:.2f} m) for "
-                       f"{seconds:.1f} s; raise scene.ceiling_z by at least {-deepest:.2f} m")
+            out.append({"message": f"likely sidecar error: the rotors are above the ceiling (by up to {-deepest:.2f} m)"
+                                   f" for {seconds:.1f} s; raise scene.ceiling_z by at least {-deepest:.2f} m",
+                        "surface": "ceiling", "reversed": False, "effects": ["ceiling_effect"]})
     return out

@@ -21,12 +21,16 @@ import numpy as np
 
 from wall_env.effects import Effect
 
-__all__ = ["Z_95", "NULL_VALUES", "MANOEUVRES", "Undetermined", "undetermined_cases", "restrict", "determined",
+__all__ = ["Z_95", "NULL_VALUES", "NULL_BY_EFFECT", "null_value", "MANOEUVRES", "Undetermined", "undetermined_cases",
+           "restrict", "determined",
            "determining_manoeuvre", "separating_manoeuvre"]
 
 Z_95 = 1.96
 NULL_VALUES = {"k_s": 0.0, "d_thr": 0.0, "D": 0.0, "C": 0.0, "F": 0.0, "w": 0.0, "scale": 1.0, "radius": 0.0,
                "time_constant": 0.0}
+#: null values of parameters whose name means something else in another effect (an affine thrust map's offset, N,
+#: has none at 0; a ground or ceiling effect's distance offset has no null value)
+NULL_BY_EFFECT = {("thrust_scale", "offset"): 0.0}
 _AXES = "xyz"
 MANOEUVRES = {
     ("wall_suction", "k_s"): "fly with the rotors within 0.15 m of the wall, at several distances",
@@ -40,6 +44,8 @@ MANOEUVRES = {
     ("ceiling_effect", "offset"): "fly slowly from 0.3 m in to within 0.03 m of the ceiling and back, several "
                                   "times (the offset shows where the distance is comparable to it)",
     ("thrust_scale", "scale"): "climb and descend briskly (thrust varying by 20 % or more)",
+    ("thrust_scale", "offset"): "climb and descend briskly over a wide range of thrust (from 70 % to 130 % of the "
+                                "weight): the offset is the thrust at zero command, the scale its slope",
     ("constant_force", "F"): "a longer flight (the force is within its noise)",
     ("motor_lag", "time_constant"): "climb and descend in steps of different lengths (0.3 s to 3 s), so that the "
                                     "thrust changes at several rates",
@@ -48,6 +54,11 @@ MANOEUVRES = {
 
 class Undetermined(dict):
     """``{"effect", "parameter", "name", "index", "value", "std", "reason", "action", "manoeuvre"}``."""
+
+
+def null_value(effect: str, name: str) -> float | None:
+    """The value at which parameter ``name`` of ``effect`` has no effect (None if it has none)."""
+    return NULL_BY_EFFECT.get((effect, name), NULL_VALUES.get(name))
 
 
 def determining_manoeuvre(effect: str, name: str, index: int | None = None) -> str:
@@ -81,7 +92,7 @@ def undetermined_cases(effects: list[Effect], stds: list[dict]) -> list[Undeterm
             error = np.atleast_1d(np.asarray(std.get(p.name, np.nan), dtype=float))
             if error.size != value.size:
                 error = np.full(value.size, np.nan)
-            null = NULL_VALUES.get(p.name)
+            null = null_value(effect.name, p.name)
             for i in range(value.size):
                 reason = _reason(float(value[i]), float(error[i]), p.low, p.high, null)
                 if reason is None:
@@ -105,14 +116,15 @@ def restrict(effects: list[Effect], cases: list[Undetermined]) -> list[Effect]:
             continue
         values = effect.params_dict()
         for c in mine:
-            null = NULL_VALUES.get(c["name"], 0.0)
+            null = null_value(effect.name, c["name"])
+            null = 0.0 if null is None else null
             if c["index"] is None:
                 values[c["name"]] = null
             else:
                 entries = list(np.atleast_1d(np.asarray(values[c["name"]], dtype=float)))
                 entries[c["index"]] = null
                 values[c["name"]] = entries
-        if mine and len(mine) >= sum(p.size for p in effect.parameters if p.name in NULL_VALUES):
+        if mine and len(mine) >= sum(p.size for p in effect.parameters if null_value(effect.name, p.name) is not None):
             continue  # every entry nulled: nothing left of this effect
         out.append(type(effect)(**values, **effect.option_values))
     return out

@@ -1,4 +1,4 @@
-"""The discovery workflow as one object: ``Discovery().fit(logs)``, then inspect what it found.
+"""The discovery workflow as one estimator: ``Discovery().fit(logs)``, then inspect, ``predict`` and ``score``.
 
 ::
 
@@ -9,20 +9,30 @@
     found.gap_before_, found.gap_after_
     found.model_.save("model.json")   # loads in the env (model=...) and in SC-MPC
     found.report()            # the JSON report as a dict
+    found.predict(read_log("other.csv"))   # the model's aerodynamic force on another flight
+    found.score(read_log("other.csv"))     # the share of the nominal model's force gap it explains there
 
-The five steps:
+One straight pipeline, each step in its own module:
 
-1. **Residuals**: the force residual of paper Eq. 28 at every sample against the
-   nominal model (:mod:`discovery.residuals`) and the open-loop prediction error over a
-   fixed horizon replaying the logged thrust (:mod:`discovery.prediction`).
-2. **Where**: which candidate regressor the residual depends on, where it is large
-   and in which direction (:mod:`discovery.regressors`).
-3. **What**: every effect of the library fitted by least squares and ranked on
-   held-out data, added greedily while it pays for itself (:mod:`discovery.selection`).
-4. **The fix**: a model file, the nominal vehicle plus the named effects with fitted
-   parameters and standard errors (:class:`wall_env.model_file.FlightModel`).
-5. **The proof**: the held-out gaps before and after (``force_rms_N``,
-   ``prediction_rms_m``) and plots (:mod:`discovery.plots`).
+1. **load** the logs (:mod:`discovery.flight_log`);
+2. **segments**: leave out what is not aerodynamic (held up by the ground or a hand,
+   :mod:`discovery.coverage`) and cut the logs into gap-free segments with their
+   cross-validation folds (:mod:`discovery.residuals`);
+3. **residuals**: the force residual of paper Eq. 28 at every sample against the nominal
+   model (:mod:`discovery.residuals`), and a scene that cannot be right (a rotor behind a
+   wall) corrected or kept away from the effects that depend on it;
+4. **localise**: which candidate regressor the residual depends on, where it is large
+   and in which direction (:mod:`discovery.regressors`);
+5. **candidates**: the effects of the library (objects; their fuller forms and an affine
+   thrust map beside them);
+6. **fit** and 7. **select**: every candidate set fitted by least squares and ranked on
+   held-out data, added greedily while it pays for itself (:mod:`discovery.selection`,
+   :mod:`discovery.fitting`); what the flight did not determine is nulled or left out and
+   the rest **fitted again** (:mod:`discovery.determination`): the model written is the model
+   scored, and one whose held-out gap is not smaller than the nominal model's is never written;
+8. **report**: the model file (:class:`wall_env.model_file.FlightModel`), the held-out gaps
+   before and after (``force_rms_N``, ``prediction_rms_m``), plots (:mod:`discovery.plots`)
+   and the JSON report (:mod:`discovery.report`).
 
 All held-out figures use the same cross-validation folds: each time block is predicted
 by parameters fitted without it. A significant residual left after the chosen
@@ -44,19 +54,20 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from discovery.coverage import REST_THRUST_SHARE, flight_limits, resting_on_ground, scene_problems
-from discovery.determination import determined, determining_manoeuvre, restrict
-from discovery.fitting import out_of_fold_residuals
+from discovery.determination import determining_manoeuvre, null_value, undetermined_cases
+from discovery.fitting import Candidate
 from discovery.flight_log import FlightLog
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
 from discovery.selection import Selection, fit_only, forward_selection
-from wall_env.aero import AeroModel
+from discovery.thrust_map import ThrustMap, written_effects
 from wall_env.effects import EFFECTS, Effect, make_effect
 from wall_env.model_file import FlightModel
 
 __all__ = ["Discovery", "DEFAULT_WINDOW_S", "DEFAULT_BLOCK_S"]
+
 
 def _rms(x: np.ndarray) -> float:
     x = np.asarray(x, dtype=float)
@@ -81,12 +92,35 @@ def minimum_duration(window_s: float, horizon_s: float) -> float:
     return max(4.0 * window_s, 2.0 * horizon_s)
 
 
+def _candidate_templates(candidates: list | None, options: dict[str, dict[str, Any]]) -> list[Effect]:
+    """The candidate effects as objects: names (with ``options``) or :class:`~wall_env.effects.Effect` instances."""
+    items = list(EFFECTS) if candidates is None else list(candidates)
+    out: list[Effect] = []
+    for item in items:
+        if isinstance(item, Effect):
+            if item.name not in EFFECTS:
+                raise ValueError(f"candidate {item!r} is not an effect of the library {sorted(EFFECTS)}")
+            out.append(item)
+        elif isinstance(item, str):
+            if item not in EFFECTS:
+                raise ValueError(f"unknown effect(s) {[item]}; the library has {sorted(EFFECTS)}")
+            out.append(make_effect(item, **options.get(item, {})))
+        else:
+            raise ValueError(f"a candidate is an effect name or an Effect instance, got {item!r}")
+    names = [e.name for e in out]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise ValueError(f"each effect may be a candidate once; repeated: {repeated}")
+    return out
+
+
 class Discovery:
     """Find what the nominal model misses in flight logs, name it from the effects library and fit it.
 
     Parameters
     ----------
-    candidates: effect names to consider (default: the whole library).
+    candidates: the effects to consider, as names or :class:`~wall_env.effects.Effect` objects (whose
+        options give the form tried first; default: the whole library).
     effect: fit only this effect, without selection (the paper's identification, Sec. 3.4).
     window_s: smoothing window of the differentiator and of the matched force kernel (s).
     block_s, n_folds: cross-validation time blocks (s) and folds.
@@ -94,7 +128,7 @@ class Discovery:
     max_effects: at most this many effects are added.
     unexplained_threshold: share of the final held-out residual that regressor bin means
         must predict for it to be reported as ``unexplained``.
-    options: effect options for candidates, e.g. ``{"wall_suction": {"thrust_scaling": True}}``.
+    options: effect options for candidates given by name, e.g. ``{"wall_suction": {"thrust_scaling": True}}``.
     motor_lag: look for a motor lag next to the chosen effects when the vehicle block gives no
         ``motor_time_constant`` (:mod:`discovery.motor_lag`); one found becomes the model's
         vehicle ``motor_time_constant`` and the effects are chosen again with it.
@@ -104,7 +138,7 @@ class Discovery:
     residual_before_: np.ndarray  # (n, 3) N, the nominal model's held-out force residual
     where_before_: dict  # where that residual is (discovery.regressors.localise_residual)
 
-    def __init__(self, candidates: list[str] | None = None, effect: str | None = None, *,
+    def __init__(self, candidates: list[str | Effect] | None = None, effect: str | None = None, *,
                  window_s: float = DEFAULT_WINDOW_S, block_s: float = DEFAULT_BLOCK_S, n_folds: int = 5,
                  horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S, max_effects: int = 3,
                  unexplained_threshold: float = 0.15, options: dict[str, dict[str, Any]] | None = None,
@@ -117,11 +151,11 @@ class Discovery:
             raise ValueError(f"n_folds must be an integer in [2, 20], got {n_folds!r}")
         if isinstance(max_effects, bool) or not isinstance(max_effects, (int, np.integer)) or max_effects < 0:
             raise ValueError(f"max_effects must be a non-negative integer, got {max_effects!r}")
-        names = list(EFFECTS) if candidates is None else list(candidates)
-        unknown = sorted(set(names) - set(EFFECTS)) + ([effect] if effect is not None and effect not in EFFECTS else [])
-        if unknown:
-            raise ValueError(f"unknown effect(s) {unknown}; the library has {sorted(EFFECTS)}")
-        self.candidates = names
+        if effect is not None and effect not in EFFECTS:
+            raise ValueError(f"unknown effect(s) {[effect]}; the library has {sorted(EFFECTS)}")
+        self.options = dict(options or {})
+        self._templates = _candidate_templates(candidates, self.options)
+        self.candidates = [e.name for e in self._templates]
         self.effect = effect
         self.window_s = float(window_s)
         self.block_s = float(block_s)
@@ -130,7 +164,6 @@ class Discovery:
         self.stride_s = float(stride_s)
         self.max_effects = int(max_effects)
         self.unexplained_threshold = float(unexplained_threshold)
-        self.options = dict(options or {})
         if not isinstance(motor_lag, bool):
             raise ValueError(f"motor_lag must be True or False, got {motor_lag!r}")
         self.motor_lag = motor_lag
@@ -142,10 +175,10 @@ class Discovery:
             self.progress(text)
 
     def _template(self, name: str) -> Effect:
-        return make_effect(name, **self.options.get(name, {}))
+        return next((e for e in self._templates if e.name == name), None) or make_effect(name, **self.options.get(name, {}))
 
     def fit(self, logs: list[FlightLog] | FlightLog) -> Discovery:
-        """Run the five steps on ``logs``; results land in the attributes ending in ``_``.
+        """Run the pipeline on ``logs``; results land in the attributes ending in ``_``.
 
         BLAS runs on one thread meanwhile: the least-squares matrices have a few thousand rows
         and at most a dozen columns, so threads gain nothing, and on a busy machine their
@@ -157,6 +190,108 @@ class Discovery:
 
     def _fit(self, logs: list[FlightLog] | FlightLog) -> Discovery:
         started = time.perf_counter()
+        # 1: load
+        logs = self._checked(logs)
+        self.logs_ = logs
+        self.notes_: list[str] = []
+        # 2: segments
+        airborne = self._airborne(logs)
+        self._say("preparing residuals")
+        try:
+            data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
+        except ValueError:
+            if airborne:
+                raise
+            shortest = minimum_duration(self.window_s, self.horizon_s)
+            return self._nothing_to_fit(f"no airborne stretch of at least {shortest:.3g} s: nothing to fit", started)
+        self.usable_ = True
+        # 3: a scene that cannot be right
+        data, airborne, excluded = self._checked_scene(data, airborne)
+        # 4-7: localise, candidates, fit, select
+        look_for_lag = self.motor_lag and self.effect is None and data.vehicle.motor_time_constant == 0
+        r_nom, selection = self._choose(data, look_for_lag, excluded)
+        # the user's nominal model, against which every "before" figure is given
+        data_before, nominal_before = data, FlightModel(data.vehicle.to_vehicle_params(), [])
+        residual_before, where_before = self.residual_before_, self.where_before_
+        lag = selection.motor_lag
+        if lag is not None and lag["kept"]:
+            # not aerodynamic: the vehicle's own motor time constant; the effects are chosen again on the thrust
+            # the lagging rotors produced
+            tau = lag["time_constant_s"]
+            self._say(f"the thrust lags the log by {1e3 * tau:.3g} ms: choosing the effects again with that lag")
+            airborne = [replace(log, vehicle=replace(log.vehicle, motor_time_constant=tau)) for log in airborne]
+            data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
+            r_nom, selection = self._choose(data, False, excluded)
+            selection.motor_lag = lag
+            self.residual_before_, self.where_before_ = residual_before, where_before
+        self.data_ = data
+        self.notes_ += [p["message"] for p in self.scene_problems_ if not p.get("corrected")]
+        self.selection_: Selection | None = selection
+        self.limits_ += selection.form_limits
+        self._lag_limits(lag)
+        # what the flight determined, fitted again without the rest; never worse than the nominal model
+        final = self._determined(data, r_nom, selection)
+        residual_after = data.concat(final.problem.out_of_fold(final.fit.fold_theta, r_nom)) if final.problem \
+            else data.concat(r_nom)
+        if final.names and _rms(residual_after) >= _rms(self.residual_before_):
+            self.withheld_: dict[str, Any] | None = {"effects": [e.name for e in final.fit.effects],
+                              "force_rms_N": _rms(residual_after), "nominal_force_rms_N": _rms(self.residual_before_)}
+            self.notes_.append(
+                f"not written: the model with {', '.join(self.withheld_['effects'])} leaves a held-out force gap of "
+                f"{self.withheld_['force_rms_N']:.4g} N, not smaller than the nominal model's "
+                f"{self.withheld_['nominal_force_rms_N']:.4g} N; the model file is the nominal model")
+            final = selection.fitter.candidate([]) if selection.fitter else final
+            residual_after = data.concat(r_nom)
+            if lag is not None and lag["kept"]:
+                lag = dict(lag, kept=False, reason="the model with it is not better than the nominal model")
+                selection.motor_lag = lag
+        else:
+            self.withheld_ = None
+        self.motor_lag_ = lag
+        self.final_: Candidate | None = final
+        self.explained_fraction_ = {e.name: selection.explained.get(e.name, 0.0) for e in final.fit.effects}
+        # 8: the fix and the proof
+        vehicle = data.vehicle.to_vehicle_params()
+        fitted = list(final.fit.effects)
+        self.effects_ = fitted
+        self.param_std_ = final.fit.std_dicts()
+        written, written_notes = written_effects(self._still_air(fitted, data))
+        self.notes_ += written_notes
+        self.model_ = FlightModel(vehicle, written, _written_std(written, fitted, self.param_std_))
+        self._say("open-loop predictions")
+        self.residual_after_ = residual_after
+        self.prediction_before_ = prediction_pairs(data_before, nominal_before.aero_model(), None, self.horizon_s,
+                                                   self.stride_s)
+        self.prediction_after_ = self._predictions(data, final, vehicle)
+        self.prediction_errors_before_ = np.linalg.norm(self.prediction_before_[1] - self.prediction_before_[2], axis=1)
+        self.prediction_errors_after_ = np.linalg.norm(self.prediction_after_[1] - self.prediction_after_[2], axis=1)
+        self.gap_before_ = {"force_rms_N": _rms(self.residual_before_),
+                            "prediction_rms_m": _rms(self.prediction_errors_before_)}
+        self.gap_after_ = {"force_rms_N": _rms(self.residual_after_),
+                           "prediction_rms_m": _rms(self.prediction_errors_after_)}
+        self.flights_ = self._flight_conditions(data, final)
+
+        # where each effect acts, and what is left
+        self.effect_forces_ = {}
+        self.where_ = {}
+        if final.problem is not None and final.names:
+            for effect, per_segment in zip(fitted, final.problem.forces(final.fit.theta)):
+                force = data.concat(per_segment)
+                self.effect_forces_[effect.name] = force
+                self.where_[effect.name] = describe_force(data, force, self.regressors_)
+        left = localise_residual(data, self.residual_after_, self.regressors_)
+        self.where_after_ = left
+        self.unexplained_ = None
+        if left["regressor"] is not None and left["explained_fraction"] >= self.unexplained_threshold \
+                and left.get("range") is not None:
+            self.unexplained_ = {"force_rms_N": _rms(self.residual_after_), "where": _public_where(left),
+                                 "shape": self._shape(left)}
+        self.runtime_s_ = time.perf_counter() - started
+        return self
+
+    # ------------------------------------------------------------------ the steps
+    def _checked(self, logs: list[FlightLog] | FlightLog) -> list[FlightLog]:
+        """Step 1: the logs as a list, each long enough for the smoothing window and the prediction horizon."""
         logs = [logs] if isinstance(logs, FlightLog) else list(logs)
         if not logs:
             raise ValueError("discovery needs at least one flight log")
@@ -168,8 +303,11 @@ class Discovery:
                     f"at least {shortest:.3g} s (4 smoothing windows of window_s = {self.window_s:g} s and 2 "
                     f"prediction horizons of horizon_s = {self.horizon_s:g} s): record a longer flight or lower "
                     "window_s / horizon_s (--window, --horizon)")
-        self.logs_ = logs
-        self.notes_: list[str] = []
+        return logs
+
+    def _airborne(self, logs: list[FlightLog]) -> list[FlightLog]:
+        """Step 2: each log without the samples something other than the thrust held up (with a note)."""
+        shortest = minimum_duration(self.window_s, self.horizon_s)
         airborne = []
         for log in logs:
             resting = resting_on_ground(log)
@@ -184,37 +322,60 @@ class Discovery:
                 kept = log.select(~resting)
                 if kept.duration >= shortest:
                     airborne.append(kept)
-        self._say("preparing residuals")
-        try:
+        return airborne
+
+    def _checked_scene(self, data: FlightData, airborne: list[FlightLog]
+                       ) -> tuple[FlightData, list[FlightLog], set[str]]:
+        """Step 3: rotors behind a wall, under the ground or above the ceiling mean the scene is wrong.
+
+        A wall whose normal points into it (most of the flight behind it) is turned round and the logs
+        prepared again, so the wall's effects are fitted on the corrected geometry; for any other
+        impossible surface, the effects that act against it are not fitted at all. The report says which."""
+        problems = scene_problems(regressors(data), data.times)
+        flipped = sorted({p["wall"] for p in problems if p["reversed"]})
+        corrected = []
+        if flipped:
+            fixed = []
+            for log in airborne:
+                walls = tuple(replace(w, normal=(-w.normal[0], -w.normal[1], -w.normal[2])) if k in flipped else w
+                              for k, w in enumerate(log.scene.walls))
+                fixed.append(replace(log, scene=replace(log.scene, walls=walls)))
+            airborne = fixed
             data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
-        except ValueError:
-            if airborne:
-                raise
-            return self._nothing_to_fit(f"no airborne stretch of at least {shortest:.3g} s: nothing to fit",
-                                        started)
-        self.usable_ = True
-        look_for_lag = self.motor_lag and self.effect is None and data.vehicle.motor_time_constant == 0
-        r_nom, selection = self._choose(data, look_for_lag)
-        # the user's nominal model, against which every "before" figure is given
-        data_before, nominal_before = data, FlightModel(data.vehicle.to_vehicle_params(), [])
-        residual_before, where_before = self.residual_before_, self.where_before_
-        lag = selection.motor_lag
-        if lag is not None and lag["kept"]:
-            # not aerodynamic: the vehicle's own motor time constant; the effects are chosen again on the thrust
-            # the lagging rotors produced
-            tau = lag["time_constant_s"]
-            self._say(f"the thrust lags the log by {1e3 * tau:.3g} ms: choosing the effects again with that lag")
-            airborne = [replace(log, vehicle=replace(log.vehicle, motor_time_constant=tau)) for log in airborne]
-            data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
-            r_nom, selection = self._choose(data, False)
-            selection.motor_lag = lag
-            self.residual_before_, self.where_before_ = residual_before, where_before
-        self.motor_lag_ = lag
-        self.data_ = data
-        vehicle = data.vehicle.to_vehicle_params()
-        self.notes_ += scene_problems(self.regressors_, data.times)
-        self.selection_: Selection | None = selection
-        self.limits_ += selection.form_limits
+            for p in problems:
+                if p["reversed"]:
+                    corrected.append({**p, "corrected": True})
+                    self.notes_.append(p["message"] + "; discovery fitted the wall's effects with that normal "
+                                       "flipped (the scene the flight shows); correct the sidecar")
+            problems = scene_problems(regressors(data), data.times)
+        excluded = {e for p in problems if not p.get("corrected") for e in p["effects"]}
+        for effect in sorted(excluded):
+            self.notes_.append(f"{effect} not fitted: it acts against a surface the scene has wrong (see the "
+                               "sidecar warning), and fitted on that geometry it would describe the error")
+        self.scene_problems_ = corrected + problems
+        return data, airborne, excluded
+
+    def _choose(self, data: FlightData, look_for_lag: bool, excluded: set[str] = frozenset()  # type: ignore[assignment]
+                ) -> tuple[list[np.ndarray], Selection]:
+        """Steps 4-7 on prepared data: the nominal residual, where it is, and what explains it."""
+        nominal = FlightModel(data.vehicle.to_vehicle_params(), [])
+        r_nom = data.residuals(nominal.aero_model())
+        self.regressors_ = regressors(data)
+        self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]))
+
+        # 4: residual and where it is
+        self.residual_before_ = data.concat(r_nom)
+        self.where_before_ = localise_residual(data, self.residual_before_, self.regressors_)
+
+        # 5-7: what
+        if self.effect is not None:
+            self._say(f"fitting {self.effect} only")
+            return r_nom, fit_only(data, r_nom, self._template(self.effect))
+        templates = [t for t in self._templates if t.name not in excluded]
+        return r_nom, forward_selection(data, r_nom, templates, self.max_effects, progress=self._say,
+                                        look_for_lag=look_for_lag)
+
+    def _lag_limits(self, lag: dict | None) -> None:
         if lag is not None and not lag["kept"] and lag["reason"].startswith(UNDETERMINED_LAG):
             self.limits_.append({"effects": [LAG_KEY], "reason": f"a motor lag would pay for itself but {lag['reason']}"
                                  " (a lag and a vertical drag look alike on a climb and descent at one pace)",
@@ -228,68 +389,112 @@ class Discovery:
                           f"{move['parameter']} would be {move['with']:.4g} instead of {move['without']:.4g}: the "
                           "flight cannot tell the lag from that effect",
                 "manoeuvre": determining_manoeuvre(LAG_KEY, "time_constant")})
-        chosen = selection.chosen
-        # only what the flight determined goes into the model (discovery.determination)
-        self.effects_, self.param_std_, self.undetermined_ = determined(list(chosen.fit.effects),
-                                                                        chosen.fit.std_dicts())
-        kept_names = {e.name for e in self.effects_}
-        self.explained_fraction_ = {k: v for k, v in selection.explained.items() if k in kept_names}
-        fold_theta = [self._restricted_theta(chosen.fit.effects, theta_k) for theta_k in chosen.fit.fold_theta]
 
-        # 4: the fix
-        self.model_ = FlightModel(vehicle, list(self.effects_),
-                                  {e.name: std for e, std in zip(self.effects_, self.param_std_)})
+    def _determined(self, data: FlightData, r_nom: list[np.ndarray], selection: Selection) -> Candidate:
+        """Only what the flight determined, fitted again: undetermined entries are held at their null value
+        and effects whose main parameter is undetermined dropped, the rest refitted and scored again, until
+        nothing more is undetermined (:mod:`discovery.determination`). The cases go to ``undetermined_``."""
+        current = selection.chosen
+        fitter = selection.fitter
+        self.undetermined_ = []
+        hold: dict[str, dict[int, float]] = {}
+        for _ in range(len(current.names) + 2):
+            cases = self._cases(current, hold)
+            if not cases or fitter is None:
+                break
+            self.undetermined_ += cases
+            dropped = {c["effect"] for c in cases if c["action"].startswith("effect left out")}
+            keys = [k for k, e in zip(current.names, current.fit.effects) if e.name not in dropped]
+            for c in cases:
+                if c["effect"] in dropped:
+                    continue
+                key = next(k for k, e in zip(current.names, current.fit.effects) if e.name == c["effect"])
+                effect = next(e for e in current.fit.effects if e.name == c["effect"])
+                null = null_value(effect.name, c["name"])
+                hold.setdefault(key, {})[_entry(effect, c["name"], c["index"])] = 0.0 if null is None else null
+            hold = {k: v for k, v in hold.items() if k in keys}
+            # every entry of an effect's first parameter (its coefficient, force or gain) held at its null: nothing
+            # is left of it
+            keys = [k for k in keys if not _nothing_left(fitter.templates[k], hold.get(k, {}))]
+            if dropped or keys != current.names or hold:
+                self._say(f"fitting again without what the flight did not determine: {', '.join(keys) or 'nothing'}")
+            current = fitter.candidate(keys, previous=current.previous(), hold=hold)
+        return current
 
-        # 5: the proof, on held-out data
-        self._say("open-loop predictions")
-        self.residual_after_ = data.concat(out_of_fold_residuals(data, self.effects_, fold_theta, r_nom))
-        self.prediction_before_ = prediction_pairs(data_before, nominal_before.aero_model(), None, self.horizon_s,
-                                                   self.stride_s)
-        fold_models = self._fold_theta(fold_theta)
-        self.prediction_after_ = prediction_pairs(data, self.model_.aero_model(), fold_models, self.horizon_s,
-                                                  self.stride_s)
-        self.prediction_errors_before_ = np.linalg.norm(self.prediction_before_[1] - self.prediction_before_[2], axis=1)
-        self.prediction_errors_after_ = np.linalg.norm(self.prediction_after_[1] - self.prediction_after_[2], axis=1)
-        self.gap_before_ = {"force_rms_N": _rms(self.residual_before_),
-                            "prediction_rms_m": _rms(self.prediction_errors_before_)}
-        self.gap_after_ = {"force_rms_N": _rms(self.residual_after_),
-                           "prediction_rms_m": _rms(self.prediction_errors_after_)}
+    def _cases(self, candidate: Candidate, hold: dict[str, dict[int, float]]) -> list:
+        """Undetermined entries of ``candidate`` not already held (for several flights: a flight's own entry counts
+        when it is undetermined in every flight)."""
+        fit = candidate.fit
+        if not candidate.names:
+            return []
+        cases = undetermined_cases(fit.effects, fit.std_dicts())
+        held = {(e.name, entry) for k, e in zip(candidate.names, fit.effects) for entry in hold.get(k, {})}
+        out = []
+        layout = fit.layout
+        for case in cases:
+            effect = next(e for e in fit.effects if e.name == case["effect"])
+            if (effect.name, _entry(effect, case["name"], case["index"])) in held:
+                continue
+            if layout is not None and layout.n_flights > 1 and case["name"] in {"w"}:
+                others = [undetermined_cases(fit.flight_effects(f), fit.std_dicts(f)) for f in range(1, layout.n_flights)]
+                if not all(any(c["effect"] == case["effect"] and c["parameter"] == case["parameter"] for c in other)
+                           for other in others):
+                    continue  # determined in another flight
+            out.append(case)
+        return out
 
-        # where each effect acts, and what is left
-        self.effect_forces_ = {}
-        self.where_ = {}
-        for effect in self.effects_:
-            force = data.concat(data.model_force(AeroModel([effect])))
-            self.effect_forces_[effect.name] = force
-            self.where_[effect.name] = describe_force(data, force, self.regressors_)
-        left = localise_residual(data, self.residual_after_, self.regressors_)
-        self.where_after_ = left
-        self.unexplained_ = None
-        if left["regressor"] is not None and left["explained_fraction"] >= self.unexplained_threshold \
-                and left.get("range") is not None:
-            self.unexplained_ = {"force_rms_N": _rms(self.residual_after_), "where": _public_where(left),
-                                 "shape": self._shape(left)}
-        self.runtime_s_ = time.perf_counter() - started
-        return self
+    def _still_air(self, effects: list[Effect], data: FlightData) -> list[Effect]:
+        """The effects for the model file: with several flights, each flight's wind is a condition of that flight
+        (in the report), and the model file is for still air."""
+        if data.n_flights <= 1:
+            return list(effects)
+        out = []
+        for effect in effects:
+            if "w" in effect.values:
+                values = {**effect.params_dict(), "w": [0.0, 0.0, 0.0]}
+                effect = type(effect)(**values, **effect.option_values)
+            out.append(effect)
+        return out
 
-    def _choose(self, data: FlightData, look_for_lag: bool) -> tuple[list[np.ndarray], Selection]:
-        """Steps 1-3 on prepared data: the nominal residual, where it is, and what explains it."""
-        nominal = FlightModel(data.vehicle.to_vehicle_params(), [])
-        r_nom = data.residuals(nominal.aero_model())
-        self.regressors_ = regressors(data)
-        self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]))
+    def _flight_conditions(self, data: FlightData, final: Candidate) -> dict:
+        """Each flight's own conditions (its wind) with their standard errors, when several flights were fitted."""
+        layout = final.fit.layout
+        if layout is None or data.n_flights <= 1:
+            return {"conditions": [], "held_out": []}
+        sources = []
+        for f in range(data.n_flights):
+            sources.append(next(seg.source for seg in data.segments if seg.flight == f))
+        conditions = []
+        for f in range(data.n_flights):
+            record: dict[str, Any] = {"log": sources[f]}
+            for effect, std in zip(final.fit.flight_effects(f), final.fit.std_dicts(f)):
+                if "w" in effect.values:
+                    record[effect.name] = {"w": [float(x) for x in effect.values["w"]], "w_std": std.get("w")}
+            conditions.append(record)
+        return {"conditions": conditions, "held_out": []}
 
-        # 1-2: residual and where it is
-        self.residual_before_ = data.concat(r_nom)
-        self.where_before_ = localise_residual(data, self.residual_before_, self.regressors_)
-
-        # 3: what
-        if self.effect is not None:
-            self._say(f"fitting {self.effect} only")
-            return r_nom, fit_only(data, r_nom, self._template(self.effect))
-        templates = [self._template(n) for n in self.candidates]
-        return r_nom, forward_selection(data, r_nom, templates, self.max_effects, progress=self._say,
-                                        look_for_lag=look_for_lag)
+    def _predictions(self, data: FlightData, final: Candidate, vehicle) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Held-out open-loop predictions of the final model: each fold's parameters (each flight's own wind),
+        the library's effects through their model and an affine thrust map on the replayed thrust."""
+        layout = final.fit.layout
+        if not final.names or layout is None:
+            model = FlightModel(vehicle, []).aero_model()
+            return prediction_pairs(data, model, None, self.horizon_s, self.stride_s)
+        library = [e for e in final.fit.effects if not isinstance(e, ThrustMap)]
+        model = FlightModel(vehicle, library).aero_model()
+        fold_theta: dict[int, list[np.ndarray]] = {}
+        thrust_maps: dict[int, list[np.ndarray]] = {}
+        for f in range(data.n_flights):
+            fold_theta[f], thrust_maps[f] = [], []
+            for theta_k in final.fit.fold_theta:
+                effects = layout.effects(theta_k, f)
+                fold_theta[f].append(FlightModel(vehicle, [e for e in effects if not isinstance(e, ThrustMap)])
+                                     .aero_model().theta())
+                maps = [e for e in effects if isinstance(e, ThrustMap)]
+                thrust_maps[f].append(maps[0].param_vector() if maps else np.array([1.0, 0.0]))
+        has_map = any(isinstance(e, ThrustMap) for e in final.fit.effects)
+        return prediction_pairs(data, model, fold_theta, self.horizon_s, self.stride_s,
+                                thrust_maps=thrust_maps if has_map else None)
 
     def _shape(self, where: dict) -> dict | None:
         """The unexplained residual along its mean direction, piecewise linear in its localising quantity."""
@@ -313,7 +518,11 @@ class Discovery:
         self.effects_, self.param_std_, self.explained_fraction_, self.undetermined_ = [], [], {}, []
         self.model_ = FlightModel(vehicle, [])
         self.selection_ = None
+        self.final_ = None
         self.motor_lag_ = None
+        self.withheld_ = None
+        self.scene_problems_ = []
+        self.flights_ = {"conditions": [], "held_out": []}
         self.limits_ = [{"effects": sorted(EFFECTS), "reason": reason,
                          "manoeuvre": "fly: take off and hover, move along each body axis at 1 m/s or more, and "
                                       "pass close to the walls, ground and ceiling of the scene"}]
@@ -325,33 +534,6 @@ class Discovery:
         self.prediction_errors_before_ = np.zeros(0)
         self.runtime_s_ = time.perf_counter() - started
         return self
-
-    def _restricted_theta(self, effects: list[Effect], theta: np.ndarray) -> np.ndarray:
-        """One fold's parameters of ``effects`` with the same undetermined entries nulled or left out."""
-        fold_effects, index = [], 0
-        for effect in effects:
-            fold_effects.append(effect.with_params(theta[index:index + effect.param_size]))
-            index += effect.param_size
-        kept = restrict(fold_effects, self.undetermined_)
-        return np.concatenate([e.param_vector() for e in kept]) if kept else np.zeros(0)
-
-    def _fold_theta(self, fold_theta: list[np.ndarray]) -> list[np.ndarray] | None:
-        """Per-fold parameters of the full model (nominal drag plus effects) for predictions."""
-        if not fold_theta:
-            return None
-        full = self.model_.aero_model()
-        out = []
-        for theta_k in fold_theta:
-            effects = []
-            index = 0
-            for effect in self.effects_:
-                effects.append(effect.with_params(theta_k[index:index + effect.param_size]))
-                index += effect.param_size
-            fold_model = FlightModel(self.model_.vehicle, effects).aero_model()
-            if fold_model.structure_key != full.structure_key:
-                raise RuntimeError("fold model structure differs from the full model")
-            out.append(fold_model.theta())
-        return out
 
     # ------------------------------------------------------------------ results
     @property
@@ -368,6 +550,31 @@ class Discovery:
         if not hasattr(self, "effects_"):
             return f"Discovery(candidates={self.candidates}, effect={self.effect})"
         return f"Discovery(found={self.names_}, gap_before={self.gap_before_}, gap_after={self.gap_after_})"
+
+
+def _entry(effect: Effect, name: str, index: int | None) -> int:
+    """Position of parameter ``name`` (entry ``index`` of a vector) in ``effect``'s own parameter vector."""
+    position = 0
+    for p in effect.parameters:
+        if p.name == name:
+            return position + (index or 0)
+        position += p.size
+    raise KeyError(f"{effect.name} has no parameter {name}")
+
+
+def _nothing_left(effect: Effect, held: dict[int, float]) -> bool:
+    """Whether every entry of ``effect``'s first parameter is held at its null value: then the effect puts no force
+    on the vehicle whatever its other parameters (a drag with every coefficient at zero has no use for a wind)."""
+    first = effect.parameters[0]
+    null = null_value(effect.name, first.name)
+    return null is not None and all(held.get(i) == null for i in range(first.size))
+
+
+def _written_std(written: list[Effect], fitted: list[Effect], stds: list[dict]) -> dict[str, dict]:
+    """Standard errors of the written effects' parameters, where a fitted effect of that name has them."""
+    by_name = {e.name: std for e, std in zip(fitted, stds)}
+    return {e.name: {p.name: by_name[e.name][p.name] for p in e.parameters if p.name in by_name[e.name]}
+            for e in written if e.name in by_name}
 
 
 def _public_where(where: dict) -> dict:
