@@ -161,6 +161,26 @@ class EffectTerm:
         return seg.smooth_force(self._evaluators[segment].force(seg.states, theta))
 
 
+def make_term(data: FlightData, effect: Effect) -> Term:
+    """The term that evaluates ``effect`` on ``data``: a library effect through its CasADi function, and
+    discovery's own candidates (a motor lag, an affine thrust map, a residual's structure, a wall that ends)
+    through theirs."""
+    from discovery.motor_lag import LagTerm, MotorLag
+    from discovery.standins import Structure, StructureTerm
+    from discovery.thrust_map import ThrustMap, ThrustMapTerm
+    from discovery.wall_extent import BoundedWall, BoundedWallTerm
+
+    if isinstance(effect, BoundedWall):
+        return BoundedWallTerm(data, effect)
+    if isinstance(effect, MotorLag):
+        return LagTerm(data, effect)
+    if isinstance(effect, ThrustMap):
+        return ThrustMapTerm(data, effect)
+    if isinstance(effect, Structure):
+        return StructureTerm(data, effect)
+    return EffectTerm(data, effect)
+
+
 @dataclass
 class FitResult:
     """Fitted effects and what the fit says about them."""
@@ -203,9 +223,6 @@ class EffectFit:
 
     def __init__(self, data: FlightData, effects: list[Effect], nominal_residual: list[np.ndarray],
                  terms: dict[Any, Term] | None = None, keys: list[str] | None = None):
-        from discovery.motor_lag import LagTerm, MotorLag
-        from discovery.thrust_map import ThrustMap, ThrustMapTerm
-
         self.data = data
         self.templates = list(effects)
         self.layout = ParameterLayout(keys or [e.name for e in effects], self.templates, data.n_flights)
@@ -217,9 +234,7 @@ class EffectFit:
         for effect in effects:
             key = term_key(effect)
             if key not in cache:
-                cache[key] = (LagTerm(data, effect) if isinstance(effect, MotorLag)
-                              else ThrustMapTerm(data, effect) if isinstance(effect, ThrustMap)
-                              else EffectTerm(data, effect))
+                cache[key] = make_term(data, effect)
             self.terms.append(cache[key])
         self.low, self.high = self.layout.low, self.layout.high
 

@@ -22,9 +22,30 @@ Keys:
     position error at the prediction horizon (m).
 ``model``
     path of the updated model file (``null`` if not written).
+``noise``
+    the log's noise floor (:func:`discovery.noise.noise_floor`): ``floor_N``, the held-out rms
+    force residual measurement noise and unlogged disturbances leave (a perfect model's), per
+    axis and the fitted noise levels.
 ``unexplained``
-    ``null``, or ``{"force_rms_N", "where"}`` when a significant residual is left that no
-    candidate explains, with where it is (regressor, range, direction, times).
+    ``null`` when the held-out residual is within :data:`~discovery.noise.FLOOR_FACTOR` times the
+    noise floor (or exceeds it by less than 0.2 % of the weight) and no regressor localises it;
+    else ``{"force_rms_N", "noise_floor_N", "times_noise_floor", "excess_rms_N", "share_of_weight",
+    "lives_in", "where", "shape", "position", "position_cells", "time", "direction_world"}``: how much
+    is left beyond the noise and where it lives (:mod:`discovery.unexplained`): ``lives_in`` is
+    ``states`` (``where``: the regressor, range, direction and times; ``shape``: piecewise linear in
+    it), ``position`` (``position``: a region of the flight over height and position along the
+    wall; ``position_cells``: the map), ``time (periodic)`` or ``time (slow)`` (``time``: the peak of
+    its spectrum's excess over the noise, its amplitude, the share below 0.5 Hz).
+``stand_ins``
+    effects the selection kept that only stood in for the unexplained residual
+    (:mod:`discovery.standins`): ``{"effect", "params", "with_structure", "reason"}``; not written.
+``withheld``
+    ``null``, or the effects a model held that were not written because its held-out force gap was
+    not smaller than the nominal model's.
+``flights``
+    with several logs: ``conditions``, each flight's own wind with its standard error (the model
+    file is for still air), and ``held_out``, each flight's force error predicted by the model fitted
+    on the other flights.
 ``closed_loop``
     ``null``, or the closed-loop check (:mod:`discovery.closed_loop`).
 ``undetermined``
@@ -90,7 +111,8 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
     selection = found.selection_
     if selection is None:  # nothing to fit
         report = {"effects": [], "motor_lag": None, "gap_before": found.gap_before_, "gap_after": found.gap_after_,
-                  "model": None if model_path is None else str(model_path), "unexplained": None,
+                  "model": None if model_path is None else str(model_path), "noise": found.noise_,
+                  "unexplained": None, "withheld": None, "flights": found.flights_,
                   "closed_loop": closed_loop, "notes": list(found.notes_), "limits": list(found.limits_),
                   "details": {"logs": _logs(found), "runtime_s": round(found.runtime_s_, 3)}}
         return _clean(report)
@@ -113,7 +135,11 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "gap_before": found.gap_before_,
         "gap_after": found.gap_after_,
         "model": None if model_path is None else str(model_path),
+        "noise": found.noise_,
         "unexplained": found.unexplained_,
+        "withheld": found.withheld_,
+        "stand_ins": [{k: v for k, v in item.items() if k != "key"} for item in found.stand_ins_],
+        "flights": found.flights_,
         "closed_loop": closed_loop,
         "notes": list(found.notes_),
         "limits": list(found.limits_),
@@ -168,15 +194,34 @@ def format_summary(report: dict[str, Any]) -> str:
         lines.append(f"found a motor lag: time_constant={_fmt(lag['time_constant_s'])} +- {_fmt(lag['std_s'])} s (the "
                      f"rotors produce the logged thrust late); explains {100 * lag['explained']:.0f} % of the held-out "
                      "residual; written as the model's vehicle motor_time_constant")
+    noise = (report.get("noise") or {}).get("floor_N")
+    after = (report.get("gap_after") or {}).get("force_rms_N")
     if not report["effects"] and not (lag and lag["kept"]):
         if "selection" not in report["details"]:
             lines.append("found nothing: the logs hold no airborne flight to fit (see the notes below)")
         elif report.get("unexplained"):
             lines.append("found no effect of the library that explains the residual (see UNEXPLAINED below)")
-        else:
-            lines.append("found nothing: the logs agree with the nominal model within noise (no candidate explains "
+        elif noise is not None and after is not None:
+            lines.append(f"found nothing: the held-out force residual, {after:.4f} N rms, is "
+                         f"{after / noise:.2g} times the log's noise floor ({noise:.4f} N, measured from the log): the "
+                         "logs agree with the nominal model within noise (no candidate explains "
                          f"{100 * MIN_SHARE:g} % of the held-out residual energy and a force of "
                          f"{100 * MIN_WEIGHT_SHARE:g} % of the weight)")
+        else:
+            lines.append("found nothing: no candidate explains "
+                         f"{100 * MIN_SHARE:g} % of the held-out residual energy and a force of "
+                         f"{100 * MIN_WEIGHT_SHARE:g} % of the weight (the log has no band to measure its noise in)")
+    elif not report.get("unexplained") and noise is not None and after is not None:
+        lines.append(f"what is left is noise: the held-out force residual, {after:.4f} N rms, is {after / noise:.2g} "
+                     f"times the log's noise floor ({noise:.4f} N)")
+    for item in report.get("stand_ins") or []:
+        params = ", ".join(f"{k}={_fmt(v)}" for k, v in item["params"].items())
+        lines.append(f"NOT WRITTEN as physics: {item['effect']} ({params}) stood in for the unexplained residual: "
+                     f"{item['reason']}")
+    if report.get("withheld"):
+        w = report["withheld"]
+        lines.append(f"NOT WRITTEN: the model with {', '.join(w['effects'])} leaves a held-out force gap of "
+                     f"{w['force_rms_N']:.4f} N, not smaller than the nominal model's {w['nominal_force_rms_N']:.4f} N")
     b, a = report["gap_before"], report["gap_after"]
     if b.get("force_rms_N") is not None:
         lines.append(f"held-out force residual RMS: {_number(b['force_rms_N'])} N -> {_number(a['force_rms_N'])} N "
@@ -201,11 +246,7 @@ def format_summary(report: dict[str, Any]) -> str:
         lines.append(f"cannot determine {' / '.join(limit['effects'])}: {limit['reason']}; to determine: "
                      f"{limit['manoeuvre']}")
     if report.get("unexplained"):
-        w = report["unexplained"]["where"]
-        lines.append(f"UNEXPLAINED residual ({report['unexplained']['force_rms_N']:.4f} N RMS) depends on "
-                     f"{w.get('regressor')} in {w.get('range')} {w.get('unit') or ''}"
-                     + (" (beyond the surface: likely a sidecar error, see the warning)"
-                        if w.get("unit") == "m" and w.get("range") and w["range"][1] <= 0 else ""))
+        lines += _unexplained_lines(report["unexplained"])
         shape = report["unexplained"].get("shape")
         if shape:
             points = ", ".join(f"{f:.3g} N at {k:.3g}" for k, f in zip(shape["knots"], shape["force_N_at_knots"]))
@@ -217,6 +258,46 @@ def format_summary(report: dict[str, Any]) -> str:
     if report.get("model"):
         lines.append(f"model file: {report['model']}")
     return "\n".join(lines)
+
+
+def _unexplained_lines(left: dict) -> list[str]:
+    """The UNEXPLAINED lines of the summary: how much is left beyond the noise, and where it lives."""
+    floor = left.get("noise_floor_N")
+    head = f"UNEXPLAINED residual ({left['force_rms_N']:.4f} N RMS"
+    if floor is not None and left.get("times_noise_floor") is not None:
+        head += (f", {left['times_noise_floor']:.2g} times the noise floor of {floor:.4f} N; "
+                 f"{100 * left['share_of_weight']:.2g} % of the weight beyond the noise")
+    head += ")"
+    lives = left.get("lives_in")
+    w = left.get("where") or {}
+    direction = left.get("direction_world")
+    if lives == "time (periodic)":
+        t = left["time"]
+        head += (f" varies in time: periodic at {t['peak_hz']:.3g} Hz, {t['peak_amplitude_N']:.3g} N amplitude along "
+                 f"{direction} ({100 * t['periodic_explained_fraction']:.0f} % of it predicted by a sinusoid at that "
+                 "frequency fitted on the other folds): a periodic gust or another force the flight's state does not "
+                 "explain")
+    elif lives == "time (slow)":
+        t = left["time"]
+        head += (f" varies in time with nothing in the flight's state or position predicting it: "
+                 f"{100 * t['slow_share']:.0f} % of its excess over the noise is below {0.5:g} Hz, along {direction} "
+                 "(a changing wind, gusts)")
+    elif lives == "position":
+        region = left["position"]["region"]
+        head += (f" lives in a region of the flight: {left['position']['along']} in {region['along_m']} m, height in "
+                 f"{region['height_m']} m" + (" (the top of the flight: a surface may end there)"
+                                              if region.get("top_of_flight") else "")
+                 + (" (the bottom of the flight)" if region.get("bottom_of_flight") else ""))
+    elif lives == "everywhere":
+        head += (f" is steady: a force of {left.get('level_N')} N (world) everywhere, what varies is within the noise; "
+                 "no candidate the flight could determine describes it")
+    elif lives == "nowhere in particular":
+        head += " is spread over the flight: no state, place or time period predicts it"
+    else:
+        head += (f" depends on {w.get('regressor')} in {w.get('range')} {w.get('unit') or ''}"
+                 + (" (beyond the surface: likely a sidecar error, see the warning)"
+                    if w.get("unit") == "m" and w.get("range") and w["range"][1] <= 0 else ""))
+    return [head]
 
 
 def _number(value: float | None) -> str:

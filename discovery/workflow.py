@@ -53,16 +53,20 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from discovery.coverage import REST_THRUST_SHARE, flight_limits, resting_on_ground, scene_problems
+from discovery.coverage import CONTACT_HEIGHT, REST_THRUST_SHARE, flight_limits, ground_contact, scene_problems
 from discovery.determination import determining_manoeuvre, null_value, undetermined_cases
-from discovery.fitting import Candidate
+from discovery.fitting import Candidate, EffectFit
 from discovery.flight_log import FlightLog
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG
+from discovery.noise import noise_floor
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
-from discovery.selection import Selection, fit_only, forward_selection
+from discovery.selection import MIN_WEIGHT_SHARE, Selection, effect_name, fit_only, forward_selection, parameter_price
+from discovery.standins import own_quantity, structure_for, test_effect
 from discovery.thrust_map import ThrustMap, written_effects
+from discovery.unexplained import is_unexplained, where_it_lives
+from discovery.wall_extent import BoundedWall, find_edge, plain_wall
 from wall_env.effects import EFFECTS, Effect, make_effect
 from wall_env.model_file import FlightModel
 
@@ -137,6 +141,7 @@ class Discovery:
 
     residual_before_: np.ndarray  # (n, 3) N, the nominal model's held-out force residual
     where_before_: dict  # where that residual is (discovery.regressors.localise_residual)
+    _hold: dict[str, dict[int, float]]  # entries held at their null value, by candidate key
 
     def __init__(self, candidates: list[str | Effect] | None = None, effect: str | None = None, *,
                  window_s: float = DEFAULT_WINDOW_S, block_s: float = DEFAULT_BLOCK_S, n_folds: int = 5,
@@ -230,36 +235,22 @@ class Discovery:
         self.limits_ += selection.form_limits
         self._lag_limits(lag)
         # what the flight determined, fitted again without the rest; never worse than the nominal model
-        final = self._determined(data, r_nom, selection)
-        residual_after = data.concat(final.problem.out_of_fold(final.fit.fold_theta, r_nom)) if final.problem \
-            else data.concat(r_nom)
-        if final.names and _rms(residual_after) >= _rms(self.residual_before_):
-            self.withheld_: dict[str, Any] | None = {"effects": [e.name for e in final.fit.effects],
-                              "force_rms_N": _rms(residual_after), "nominal_force_rms_N": _rms(self.residual_before_)}
-            self.notes_.append(
-                f"not written: the model with {', '.join(self.withheld_['effects'])} leaves a held-out force gap of "
-                f"{self.withheld_['force_rms_N']:.4g} N, not smaller than the nominal model's "
-                f"{self.withheld_['nominal_force_rms_N']:.4g} N; the model file is the nominal model")
-            final = selection.fitter.candidate([]) if selection.fitter else final
-            residual_after = data.concat(r_nom)
-            if lag is not None and lag["kept"]:
-                lag = dict(lag, kept=False, reason="the model with it is not better than the nominal model")
-                selection.motor_lag = lag
-        else:
-            self.withheld_ = None
-        self.motor_lag_ = lag
-        self.final_: Candidate | None = final
-        self.explained_fraction_ = {e.name: selection.explained.get(e.name, 0.0) for e in final.fit.effects}
-        # 8: the fix and the proof
-        vehicle = data.vehicle.to_vehicle_params()
-        fitted = list(final.fit.effects)
-        self.effects_ = fitted
-        self.param_std_ = final.fit.std_dicts()
-        written, written_notes = written_effects(self._still_air(fitted, data))
-        self.notes_ += written_notes
-        self.model_ = FlightModel(vehicle, written, _written_std(written, fitted, self.param_std_))
+        self.noise_ = noise_floor(data)
+        self.stand_ins_: list[dict] = []
+        self.withheld_: dict[str, Any] | None = None
+        final = self._never_worse(data, r_nom, self._determined(data, r_nom, selection), selection)
+        final = self._wall_edge(data, r_nom, final, selection)
+        self._finish(data, r_nom, final, selection)
+        # a kept effect that only stands in for a structure the library cannot describe is not written as physics;
+        # asked only when something is left: a one-parameter effect that leaves nothing but noise is the simpler
+        # account of its residual than any shape-free description (on a sinusoidal flight a thrust scale's force
+        # is also a function of the position)
+        if final.names and self.unexplained_ is not None:
+            final = self._without_stand_ins(data, r_nom, final, selection)
+        self.notes_ += self.written_notes_
+        # the proof against the user's nominal model
         self._say("open-loop predictions")
-        self.residual_after_ = residual_after
+        vehicle = data.vehicle.to_vehicle_params()
         self.prediction_before_ = prediction_pairs(data_before, nominal_before.aero_model(), None, self.horizon_s,
                                                    self.stride_s)
         self.prediction_after_ = self._predictions(data, final, vehicle)
@@ -269,9 +260,96 @@ class Discovery:
                             "prediction_rms_m": _rms(self.prediction_errors_before_)}
         self.gap_after_ = {"force_rms_N": _rms(self.residual_after_),
                            "prediction_rms_m": _rms(self.prediction_errors_after_)}
-        self.flights_ = self._flight_conditions(data, final)
+        self.runtime_s_ = time.perf_counter() - started
+        return self
 
-        # where each effect acts, and what is left
+    def _never_worse(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate,
+                     selection: Selection) -> Candidate:
+        """``final``, or the nominal model when ``final``'s held-out force gap is not smaller than the nominal's."""
+        residual_after = data.concat(final.problem.out_of_fold(final.fit.fold_theta, r_nom)) if final.problem \
+            else data.concat(r_nom)
+        if not final.names or _rms(residual_after) < _rms(self.residual_before_) or selection.fitter is None:
+            return final
+        self.withheld_ = {"effects": [e.name for e in final.fit.effects], "force_rms_N": _rms(residual_after),
+                          "nominal_force_rms_N": _rms(self.residual_before_)}
+        self.notes_.append(
+            f"not written: the model with {', '.join(self.withheld_['effects'])} leaves a held-out force gap of "
+            f"{self.withheld_['force_rms_N']:.4g} N, not smaller than the nominal model's "
+            f"{self.withheld_['nominal_force_rms_N']:.4g} N; the model file is the nominal model")
+        lag = selection.motor_lag
+        if lag is not None and lag["kept"]:
+            selection.motor_lag = dict(lag, kept=False, reason="the model with it is not better than the nominal model")
+        return selection.fitter.candidate([])
+
+    def _wall_edge(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate,
+                   selection: Selection) -> Candidate:
+        """Wall suction fitted again on the wall's side of an edge, when the data show one and it scores better by
+        more than a parameter's price (:mod:`discovery.wall_extent`). The edge is looked for again with the
+        suction fitted on its side, until it stays within a centimetre."""
+        self.wall_edge_: dict | None = None
+        fitter = selection.fitter
+        index = next((i for i, e in enumerate(final.fit.effects) if e.name == "wall_suction"), None)
+        if index is None or fitter is None:
+            return final
+        key = final.names[index]
+        options = {k: v for k, v in fitter.templates[key].option_values.items()
+                   if k not in ("axis", "side", "edge_m")}
+        current, edge = final, None
+        for _ in range(3):
+            assert current.problem is not None
+            forces = current.problem.forces(current.fit.theta)
+            others = sum((data.concat(per_segment) for i, per_segment in enumerate(forces) if i != index),
+                         np.zeros((data.n_samples, 3)))
+            # the suction of the whole plane at the current parameters, against what the data show of it
+            wall = plain_wall(current.fit.effects[index])
+            plane = EffectFit(data, [wall], r_nom, fitter.terms, ["plane"])
+            suction = data.concat(plane.forces(wall.param_vector())[0])
+            found = find_edge(data, suction, data.concat(r_nom) - others)
+            if found is None or (edge is not None and (found["axis"], found["side"]) != (edge["axis"], edge["side"])):
+                break
+            if edge is not None and abs(found["edge_m"] - edge["edge_m"]) < 0.01:
+                break
+            edge = found
+            template = BoundedWall(**options, axis=edge["axis"], side=edge["side"], edge_m=float(edge["edge_m"]))
+            bounded_key = f"{effect_name(key)}[edge {edge['axis']} {edge['side']} {edge['edge_m']:.4f}]"
+            fitter.add(bounded_key, template)
+            keys = [bounded_key if k == current.names[index] else k for k in current.names]
+            rename = {current.names[index]: bounded_key}
+            self._say(f"wall suction on one side of an edge: {template.describe()}")
+            current = fitter.candidate(keys, previous={rename.get(k, k): v for k, v in current.previous().items()},
+                                       hold={rename.get(k, k): v for k, v in self._hold.items()})
+            self._hold = {rename.get(k, k): v for k, v in self._hold.items()}
+        if edge is None or current is final:
+            return final
+        if current.score >= final.score - parameter_price(data.effective_samples()):
+            self._hold = {(key if effect_name(k) == "wall_suction" else k): v for k, v in self._hold.items()}
+            return final
+        bounded = fitter.templates[current.names[index]]
+        assert isinstance(bounded, BoundedWall)
+        self.wall_edge_ = {**edge, "description": bounded.describe()}
+        self.notes_.append(
+            f"wall 0 seems to end: where the fitted wall suction acts, the data show {100 * edge['gain_outside']:.0f} % "
+            f"of it beyond the edge and {100 * edge['gain_inside']:.0f} % on the wall's side; {bounded.describe()}. "
+            "Wall suction was fitted on the wall's side only (the held-out score is better by more than a parameter's "
+            "price); the model file's wall_suction acts on the whole plane the scene gives: limit the wall in your "
+            "simulation to where it is")
+        return current
+
+    def _finish(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate, selection: Selection) -> None:
+        """The final model's held-out residual, model file, each effect's force and where it acts, and what is
+        left beyond the noise."""
+        self.final_: Candidate | None = final
+        self.motor_lag_ = selection.motor_lag
+        self.explained_fraction_ = {e.name: selection.explained.get(e.name, 0.0) for e in final.fit.effects}
+        self.residual_after_ = data.concat(final.problem.out_of_fold(final.fit.fold_theta, r_nom)) \
+            if final.problem and final.names else data.concat(r_nom)
+        vehicle = data.vehicle.to_vehicle_params()
+        fitted = list(final.fit.effects)
+        self.effects_ = fitted
+        self.param_std_ = final.fit.std_dicts()
+        written, self.written_notes_ = written_effects([plain_wall(e) for e in self._still_air(fitted, data)])
+        self.model_ = FlightModel(vehicle, written, _written_std(written, fitted, self.param_std_))
+        self.flights_ = self._flight_conditions(data, final)
         self.effect_forces_ = {}
         self.where_ = {}
         if final.problem is not None and final.names:
@@ -279,15 +357,87 @@ class Discovery:
                 force = data.concat(per_segment)
                 self.effect_forces_[effect.name] = force
                 self.where_[effect.name] = describe_force(data, force, self.regressors_)
+        self.unexplained_ = self._unexplained(data)
+
+    def _without_stand_ins(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate,
+                           selection: Selection) -> Candidate:
+        """Drop the kept effects that only stand in for a structure the library cannot describe
+        (:mod:`discovery.standins`), fit the rest again and finish with them; one that acts partly as a proxy
+        becomes a limit.
+
+        Each kept effect is taken out in turn: where the residual then lives (:mod:`discovery.unexplained`) is
+        what the effect was explaining. When that is not the effect's own quantity (a thrust scale explaining a
+        residual that depends on height), the effect is fitted again next to a shape-free description of it."""
+        fitter = selection.fitter
+        if fitter is None:
+            return final
+        changed = False
+        for _ in range(2):  # what is left after dropping stand-ins is asked again
+            found: list[dict] = []
+            for i, key in enumerate(final.names):
+                others = [k for k in final.names if k != key]
+                without = fitter.candidate(others, previous=final.previous(),
+                                           hold={k: v for k, v in self._hold.items() if k in others})
+                residual = data.concat(without.problem.out_of_fold(without.fit.fold_theta, r_nom)) \
+                    if without.problem is not None and others else data.concat(r_nom)
+                if not is_unexplained(_rms(residual), self.noise_, data.weight, MIN_WEIGHT_SHARE):
+                    continue
+                where = where_it_lives(data, residual, self.regressors_, self.noise_, self.unexplained_threshold)
+                if own_quantity(final.fit.effects[i], where):
+                    continue
+                structure = structure_for(data, where, self.regressors_)
+                if structure is None:
+                    continue
+                self._say(f"asking whether {key} only stands in for a residual that {where['lives_in']} describes")
+                standin, proxies = test_effect(fitter, final, i, structure, where,
+                                               parameter_price(data.effective_samples()), self._hold)
+                if standin is not None:
+                    found.append(standin)
+                for proxy in proxies:
+                    self.limits_.append({
+                        "effects": [proxy["effect"]],
+                        "reason": f"{proxy['effect']} {proxy['parameter']} acts partly as a proxy: without it the "
+                                  f"residual {proxy['lives_in']}, and with that described apart it would be "
+                                  f"{proxy['with']:.4g} instead of {proxy['without']:.4g} (+- {proxy['std']:.2g})",
+                        "manoeuvre": "fly where that residual does not, or vary that quantity independently of the "
+                                     "others"})
+            if not found:
+                break
+            changed = True
+            self.stand_ins_ += found
+            dropped = {s["key"] for s in found}
+            keys = [k for k in final.names if k not in dropped]
+            self._say(f"not written as physics (stand-ins): {', '.join(sorted(dropped))}")
+            final = fitter.candidate(keys, previous=final.previous(),
+                                     hold={k: v for k, v in self._hold.items() if k in keys})
+            if not keys:
+                break
+        if changed:
+            self._finish(data, r_nom, final, selection)
+        return final
+
+    def _unexplained(self, data: FlightData) -> dict | None:
+        """What the final model leaves that is more than noise, and where it lives (:mod:`discovery.unexplained`)."""
         left = localise_residual(data, self.residual_after_, self.regressors_)
         self.where_after_ = left
-        self.unexplained_ = None
-        if left["regressor"] is not None and left["explained_fraction"] >= self.unexplained_threshold \
-                and left.get("range") is not None:
-            self.unexplained_ = {"force_rms_N": _rms(self.residual_after_), "where": _public_where(left),
-                                 "shape": self._shape(left)}
-        self.runtime_s_ = time.perf_counter() - started
-        return self
+        after = _rms(self.residual_after_)
+        localised = left["regressor"] is not None and left["explained_fraction"] >= self.unexplained_threshold \
+            and left.get("range") is not None
+        above = is_unexplained(after, self.noise_, data.weight, MIN_WEIGHT_SHARE)
+        if not (above or localised):
+            return None
+        where = where_it_lives(data, self.residual_after_, self.regressors_, self.noise_, self.unexplained_threshold)
+        self._where_left = where
+        floor = self.noise_["floor_N"]
+        excess = math.sqrt(max(after**2 - floor**2, 0.0)) if math.isfinite(floor) else after
+        states = where["states"] if where["states"].get("regressor") not in (None, "everywhere") else left
+        return {"force_rms_N": after, "noise_floor_N": floor, "times_noise_floor": after / floor if floor else None,
+                "excess_rms_N": excess, "share_of_weight": excess / data.weight, "lives_in": where["lives_in"],
+                "where": _public_where(states),
+                "shape": self._shape(states) if where["lives_in"] == "states" or localised else None,
+                "position": {k: v for k, v in where["position"].items() if k != "cells"},
+                "position_cells": where["position"]["cells"], "time": where["time"], "level_N": where["level_N"],
+                "direction_world": where["direction_world"]}
 
     # ------------------------------------------------------------------ the steps
     def _checked(self, logs: list[FlightLog] | FlightLog) -> list[FlightLog]:
@@ -309,17 +459,28 @@ class Discovery:
         """Step 2: each log without the samples something other than the thrust held up (with a note)."""
         shortest = minimum_duration(self.window_s, self.horizon_s)
         airborne = []
+        self.left_out_: list[dict] = []
         for log in logs:
-            resting = resting_on_ground(log)
+            resting, contact = ground_contact(log)
+            dt = float(np.median(np.diff(log.t)))
             if resting.any():
-                dt = float(np.median(np.diff(log.t)))
                 self.notes_.append(
                     f"{log.source}: {resting.sum() * dt:.1f} s of {log.duration:.1f} s held up by something "
                     f"else: the thrust carries less than {100 * REST_THRUST_SHARE:.0f} % of the weight and the vehicle "
                     "does not fall (on the ground or held): "
                     "left out, that force is not aerodynamic")
-            if (~resting).sum() >= 2 and not resting.all():
-                kept = log.select(~resting)
+            if contact.any():
+                self.notes_.append(
+                    f"{log.source}: {contact.sum() * dt:.1f} s of rotors spinning up or down on the ground (next to a "
+                    f"rest, within {100 * CONTACT_HEIGHT:.0f} cm of the height the vehicle rested at, the thrust below "
+                    "the weight): left out, the ground still carries part of the weight")
+            for mask, why in ((resting, "held up"), (contact, "ground contact")):
+                if mask.any():
+                    self.left_out_.append({"log": log.source, "reason": why, "seconds": round(float(mask.sum() * dt), 3),
+                                           "time_intervals": _intervals(log.t, mask)})
+            left_out = resting | contact
+            if (~left_out).sum() >= 2 and not left_out.all():
+                kept = log.select(~left_out)
                 if kept.duration >= shortest:
                     airborne.append(kept)
         return airborne
@@ -398,6 +559,7 @@ class Discovery:
         fitter = selection.fitter
         self.undetermined_ = []
         hold: dict[str, dict[int, float]] = {}
+        self._hold = hold
         for _ in range(len(current.names) + 2):
             cases = self._cases(current, hold)
             if not cases or fitter is None:
@@ -419,6 +581,7 @@ class Discovery:
             if dropped or keys != current.names or hold:
                 self._say(f"fitting again without what the flight did not determine: {', '.join(keys) or 'nothing'}")
             current = fitter.candidate(keys, previous=current.previous(), hold=hold)
+        self._hold = hold
         return current
 
     def _cases(self, candidate: Candidate, hold: dict[str, dict[int, float]]) -> list:
@@ -471,7 +634,110 @@ class Discovery:
                 if "w" in effect.values:
                     record[effect.name] = {"w": [float(x) for x in effect.values["w"]], "w_std": std.get("w")}
             conditions.append(record)
-        return {"conditions": conditions, "held_out": []}
+        return {"conditions": conditions, "held_out": self._held_out_flights(data, final, sources)}
+
+    def _held_out_flights(self, data: FlightData, final: Candidate, sources: list[str]) -> list[dict]:
+        """Each flight predicted by the model fitted on the others: the shared parameters (the vehicle's and the
+        aerodynamics') from the other flights, the held-out flight's own conditions (its wind) fitted on it
+        alone. Its force error (rms, at the fit rows) against the full fit's error on it."""
+        problem, fit = final.problem, final.fit
+        if problem is None or not final.names or fit.layout is None:
+            return []
+        held = fit.held if fit.held is not None else np.zeros(problem.size, dtype=bool)
+        inside = problem.residuals(fit.theta)
+        out = []
+        for f in range(data.n_flights):
+            others = [np.full(len(rows), seg.flight != f) for seg, rows in zip(data.segments, problem.rows)]
+            mine = [~m for m in others]
+            if not any(m.any() for m in others):
+                continue
+            shared = problem.fit(masks=others, theta0=fit.theta, held=held).theta
+            own = fit.layout.flight_entries(f) & ~held
+            theta = problem._solve(shared, mine, free=own).x if own.any() else shared
+            predicted = problem.residuals(theta)
+            held_out = _rms(np.concatenate([r[m] for r, m in zip(predicted, mine)]))
+            in_sample = _rms(np.concatenate([r[m] for r, m in zip(inside, mine)]))
+            out.append({"log": sources[f], "force_rms_N": held_out, "in_sample_force_rms_N": in_sample,
+                        "ratio_to_in_sample": held_out / in_sample if in_sample > 0 else None,
+                        "conditions_fitted_on_it": int(own.sum())})
+        return out
+
+    # ------------------------------------------------------------------ a fitted model on other flights
+    def _prepared(self, logs: list[FlightLog] | FlightLog) -> FlightData:
+        """``logs`` as the fitted model sees them: ground contact left out, the model's motor lag applied."""
+        if not hasattr(self, "final_") or self.final_ is None:
+            raise RuntimeError("call fit(logs) before predict or score")
+        logs = self._checked(logs)
+        tau = self.model_.vehicle.motor_time_constant
+        kept = []
+        for log in logs:
+            resting, contact = ground_contact(log)
+            if (~(resting | contact)).sum() >= 2:
+                part = log.select(~(resting | contact))
+                kept.append(replace(part, vehicle=replace(part.vehicle, motor_time_constant=tau)) if tau > 0 else part)
+        if not kept:
+            raise ValueError("the logs hold no airborne flight to predict")
+        return prepare(kept, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
+
+    def _forces_on(self, data: FlightData, conditions: dict[str, dict[str, Any]] | None
+                   ) -> tuple[list[np.ndarray], list[np.ndarray], list[dict]]:
+        """The final model on ``data``: per segment the nominal residual and the model's residual, and each
+        flight's conditions (given, or fitted on the flight with the shared parameters held)."""
+        assert self.final_ is not None
+        final = self.final_
+        nominal = FlightModel(data.vehicle.to_vehicle_params(), []).aero_model()
+        r_nom = data.residuals(nominal)
+        if not final.names:
+            return r_nom, r_nom, [{} for _ in range(data.n_flights)]
+        templates = [self.selection_.fitter.templates[k] for k in final.names] if self.selection_ and \
+            self.selection_.fitter else list(final.fit.effects)
+        problem = EffectFit(data, templates, r_nom, None, list(final.names))
+        layout, fitted = problem.layout, final.fit
+        theta = layout.pack({k: e.param_vector() for k, e in zip(final.names, fitted.effects)})
+        own = np.zeros(layout.size, dtype=bool)
+        for e, effect in enumerate(layout.templates):
+            for f in range(layout.n_flights):
+                rows = layout.index[e][f]
+                for position, parameter in zip(rows, _entry_names(effect)):
+                    if parameter != "w":
+                        continue
+                    given = (conditions or {}).get(effect.name, {}).get("w")
+                    if given is not None:
+                        theta[position] = float(np.asarray(given, dtype=float)[_component(effect, position - rows[0])])
+                    elif not (fitted.held is not None and fitted.held.size and _held_w(fitted, e)):
+                        own[position] = True
+        if own.any():
+            theta = problem._solve(theta, [np.ones(len(r), dtype=bool) for r in problem.rows], free=own).x
+        residual = problem.out_of_fold([theta] * data.n_folds, r_nom)
+        used = [{e.name: e.params_dict() for e in layout.effects(theta, f) if "w" in e.values}
+                for f in range(data.n_flights)]
+        return r_nom, residual, used
+
+    def predict(self, logs: list[FlightLog] | FlightLog, conditions: dict[str, dict[str, Any]] | None = None
+                ) -> np.ndarray:
+        """The aerodynamic force (N, world frame, smoothed as the residual is) the fitted model predicts at every
+        sample of ``logs`` (concatenated), NaN where a sample is left out (ground contact, a segment too short).
+
+        The model's shared parameters are used as fitted; a flight's own conditions (a steady wind of
+        ``quadratic_drag`` with wind) are taken from ``conditions`` (``{"quadratic_drag": {"w": [...]}}``) or,
+        when not given, fitted on the flight itself with everything else held (:attr:`conditions_` says which)."""
+        logs = [logs] if isinstance(logs, FlightLog) else list(logs)
+        data = self._prepared(logs)
+        r_nom, residual, self.conditions_ = self._forces_on(data, conditions)
+        out = [np.full((log.n_samples, 3), np.nan) for log in logs]
+        for seg, measured, left in zip(data.segments, (s.measured_force for s in data.segments), residual):
+            rows = np.searchsorted(logs[seg.log_index].t, seg.t)
+            out[seg.log_index][rows] = measured - left
+        return np.concatenate(out)
+
+    def score(self, logs: list[FlightLog] | FlightLog, conditions: dict[str, dict[str, Any]] | None = None) -> float:
+        """The share of the nominal model's force-gap energy the fitted model explains on ``logs``: 1 for a perfect
+        model, 0 for one no better than the nominal, negative for a worse one (the scikit-learn convention: higher
+        is better). Conditions as in :meth:`predict`."""
+        data = self._prepared(logs)
+        r_nom, residual, self.conditions_ = self._forces_on(data, conditions)
+        before = float(np.sum(data.concat(r_nom) ** 2))
+        return 1.0 - float(np.sum(data.concat(residual) ** 2)) / before if before > 0 else 0.0
 
     def _predictions(self, data: FlightData, final: Candidate, vehicle) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Held-out open-loop predictions of the final model: each fold's parameters (each flight's own wind),
@@ -480,7 +746,8 @@ class Discovery:
         if not final.names or layout is None:
             model = FlightModel(vehicle, []).aero_model()
             return prediction_pairs(data, model, None, self.horizon_s, self.stride_s)
-        library = [e for e in final.fit.effects if not isinstance(e, ThrustMap)]
+        # the library's effects as the model file holds them (a wall that ends is the scene's plane there)
+        library = [plain_wall(e) for e in final.fit.effects if not isinstance(e, ThrustMap)]
         model = FlightModel(vehicle, library).aero_model()
         fold_theta: dict[int, list[np.ndarray]] = {}
         thrust_maps: dict[int, list[np.ndarray]] = {}
@@ -488,8 +755,8 @@ class Discovery:
             fold_theta[f], thrust_maps[f] = [], []
             for theta_k in final.fit.fold_theta:
                 effects = layout.effects(theta_k, f)
-                fold_theta[f].append(FlightModel(vehicle, [e for e in effects if not isinstance(e, ThrustMap)])
-                                     .aero_model().theta())
+                fold_theta[f].append(FlightModel(vehicle, [plain_wall(e) for e in effects
+                                                           if not isinstance(e, ThrustMap)]).aero_model().theta())
                 maps = [e for e in effects if isinstance(e, ThrustMap)]
                 thrust_maps[f].append(maps[0].param_vector() if maps else np.array([1.0, 0.0]))
         has_map = any(isinstance(e, ThrustMap) for e in final.fit.effects)
@@ -528,6 +795,11 @@ class Discovery:
                                       "pass close to the walls, ground and ceiling of the scene"}]
         self.where_, self.where_before_, self.where_after_, self.effect_forces_ = {}, {}, {}, {}
         self.unexplained_ = None
+        self.noise_ = {"floor_N": float("nan")}
+        self.stand_ins_, self.written_notes_ = [], []
+        self.wall_edge_ = None
+        if not hasattr(self, "left_out_"):
+            self.left_out_ = []
         nan = float("nan")
         self.gap_before_ = {"force_rms_N": nan, "prediction_rms_m": nan}
         self.gap_after_ = dict(self.gap_before_)
@@ -550,6 +822,29 @@ class Discovery:
         if not hasattr(self, "effects_"):
             return f"Discovery(candidates={self.candidates}, effect={self.effect})"
         return f"Discovery(found={self.names_}, gap_before={self.gap_before_}, gap_after={self.gap_after_})"
+
+
+def _entry_names(effect: Effect) -> list[str]:
+    """The parameter name of every entry of ``effect``'s own vector."""
+    return [p.name for p in effect.parameters for _ in range(p.size)]
+
+
+def _component(effect: Effect, position: int) -> int:
+    """Entry ``position`` of ``effect``'s own vector as the component of its parameter."""
+    for p in effect.parameters:
+        if position < p.size:
+            return position
+        position -= p.size
+    raise IndexError(position)
+
+
+def _held_w(fit, effect_index: int) -> bool:
+    """Whether every wind entry of effect ``effect_index`` was held (undetermined) in ``fit``."""
+    layout = fit.layout
+    rows = layout.index[effect_index][0]
+    names = _entry_names(layout.templates[effect_index])
+    wind = [r for r, n in zip(rows, names) if n == "w"]
+    return bool(wind) and bool(np.all(fit.held[wind]))
 
 
 def _entry(effect: Effect, name: str, index: int | None) -> int:
@@ -575,6 +870,15 @@ def _written_std(written: list[Effect], fitted: list[Effect], stds: list[dict]) 
     by_name = {e.name: std for e, std in zip(fitted, stds)}
     return {e.name: {p.name: by_name[e.name][p.name] for p in e.parameters if p.name in by_name[e.name]}
             for e in written if e.name in by_name}
+
+
+def _intervals(t: np.ndarray, mask: np.ndarray) -> list[list[float]]:
+    """The stretches of ``t`` where ``mask`` holds, as ``[from_s, to_s]``."""
+    out: list[list[float]] = []
+    changes = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    for a, b in zip(changes[::2], changes[1::2]):
+        out.append([round(float(t[a]), 3), round(float(t[b - 1]), 3)])
+    return out
 
 
 def _public_where(where: dict) -> dict:

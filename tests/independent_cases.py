@@ -107,7 +107,7 @@ def cases(seed: int) -> list[Case]:
         Case("ground_contact", {"linear_drag": D}, OPEN, {"linear_drag": {"D": D}}, {"wall": False}, takeoff=True,
              says=("ground",)),
         Case("thrust_map", {"thrust_scale": scale, "thrust_offset": offset}, OPEN,
-             {"thrust_map": {"scale": scale, "offset": offset}}, {"wall": False}),
+             {"thrust_scale": {"scale": scale, "offset": offset}}, {"wall": False}),
         # ---- long logs (a distance offset needs slow, close passes)
         Case("ground_offset", {"ground": (radius, 0.012)}, GROUND_CLOSE,
              {"ground_effect": {"radius": radius, "offset": 0.012}}, {"wall": False}, duration=360.0, long=True),
