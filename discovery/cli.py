@@ -153,16 +153,23 @@ def run(args: argparse.Namespace) -> int:
     found.model_.save(model_path)
     closed_loop = None
     if args.closed_loop:
-        from discovery.closed_loop import closed_loop_check, load_scenario
+        from discovery.closed_loop import closed_loop_check, load_scenario, scenario_match
 
         scenario_file = Path(args.scenario) if args.scenario else scenario_path(args.logs[0])
         if not scenario_file.exists():
             return _fail(f"--closed-loop needs the log's world: {scenario_file} does not exist "
                          "(fly writes it beside the log; or pass --scenario)")
+        try:
+            scenario = load_scenario(scenario_file)
+            problems, own = scenario_match(scenario, logs[0], args.logs[0])
+        except ValueError as exc:
+            return _fail(f"--scenario {scenario_file}: {exc}")
+        if problems:
+            return _fail(f"--scenario {scenario_file} is not the world of {args.logs[0]}: {'; '.join(problems)}")
         if say:
             say(f"closed-loop check in {scenario_file}")
-        closed_loop = closed_loop_check(model_path, load_scenario(scenario_file),
-                                        seeds=range(args.closed_loop_seeds), duration=args.closed_loop_duration)
+        closed_loop = closed_loop_check(model_path, scenario, seeds=range(args.closed_loop_seeds),
+                                        duration=args.closed_loop_duration, ground_truth=own)
     if not args.no_plots and found.usable_:
         from discovery.plots import plot_all
 

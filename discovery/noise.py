@@ -143,8 +143,8 @@ def residual_spectrum(data: FlightData, residual: np.ndarray, floor: dict) -> di
         part = residual[start:start + seg.n]
         start += seg.n
         dt = seg.dt
-        length = int(round(_SPECTRUM_S / dt))
-        if seg.n < length // 2 or length < 16:
+        length = min(int(round(_SPECTRUM_S / dt)), seg.n)
+        if length < 16:
             continue
         nu, power = _welch(part, length)
         noise = np.zeros_like(power)

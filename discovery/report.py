@@ -39,6 +39,18 @@ Keys:
 ``stand_ins``
     effects the selection kept that only stood in for the unexplained residual
     (:mod:`discovery.standins`): ``{"effect", "params", "with_structure", "reason"}``; not written.
+``cancelling``
+    sets of effects whose forces cancelled each other (look-alikes near hover): their forces, what was
+    kept (the simplest account within a parameter's price of the best held-out score) and the manoeuvre
+    that separates them (:mod:`discovery.cancelling`).
+``wall_edge``
+    ``null``, or where wall 0 seems to end (:mod:`discovery.wall_extent`): the axis, the side the wall is on,
+    the edge and the share of the fitted suction the data show on either side.
+``vehicle_fields``
+    where each field of the model file's vehicle came from: given in the vehicle block, derived from it,
+    found (a motor lag), or defaulted (the paper vehicle's value; the log says nothing about it).
+``left_out``
+    the stretches of each log left out and why (held up, ground contact).
 ``withheld``
     ``null``, or the effects a model held that were not written because its held-out force gap was
     not smaller than the nominal model's.
@@ -139,6 +151,10 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "unexplained": found.unexplained_,
         "withheld": found.withheld_,
         "stand_ins": [{k: v for k, v in item.items() if k != "key"} for item in found.stand_ins_],
+        "cancelling": found.cancelling_,
+        "vehicle_fields": found.model_.vehicle_fields,
+        "wall_edge": found.wall_edge_,
+        "left_out": found.left_out_,
         "flights": found.flights_,
         "closed_loop": closed_loop,
         "notes": list(found.notes_),
@@ -257,6 +273,11 @@ def format_summary(report: dict[str, Any]) -> str:
         lines.append(cl.get("summary", ""))
     if report.get("model"):
         lines.append(f"model file: {report['model']}")
+        fields = report.get("vehicle_fields") or {}
+        defaulted = sorted(k for k, v in fields.items() if v.startswith("defaulted"))
+        if defaulted:
+            lines.append(f"  its vehicle's {', '.join(defaulted)} are defaults (the paper's vehicle, or 0), not "
+                         "yours: the model file's vehicle_fields says where each came from")
     return "\n".join(lines)
 
 

@@ -53,6 +53,8 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from discovery.cancelling import cancelling_sets, simpler
+from discovery.cancelling import manoeuvre as cancel_manoeuvre
 from discovery.coverage import CONTACT_HEIGHT, REST_THRUST_SHARE, flight_limits, ground_contact, scene_problems
 from discovery.determination import determining_manoeuvre, null_value, undetermined_cases
 from discovery.fitting import Candidate, EffectFit
@@ -239,6 +241,7 @@ class Discovery:
         self.stand_ins_: list[dict] = []
         self.withheld_: dict[str, Any] | None = None
         final = self._never_worse(data, r_nom, self._determined(data, r_nom, selection), selection)
+        final = self._cancelling(data, final, selection)
         final = self._wall_edge(data, r_nom, final, selection)
         self._finish(data, r_nom, final, selection)
         # a kept effect that only stands in for a structure the library cannot describe is not written as physics;
@@ -280,6 +283,32 @@ class Discovery:
         if lag is not None and lag["kept"]:
             selection.motor_lag = dict(lag, kept=False, reason="the model with it is not better than the nominal model")
         return selection.fitter.candidate([])
+
+    def _cancelling(self, data: FlightData, final: Candidate, selection: Selection) -> Candidate:
+        """Kept effects whose forces cancel are look-alikes (:mod:`discovery.cancelling`): reported with the
+        manoeuvre that separates them, and the simplest account the held-out score cannot tell from them kept."""
+        self.cancelling_: list[dict] = []
+        fitter = selection.fitter
+        if fitter is None or final.problem is None or len(final.names) < 2:
+            return final
+        forces = [data.concat(per_segment) for per_segment in final.problem.forces(final.fit.theta)]
+        sets = cancelling_sets([e.name for e in final.fit.effects], forces, MIN_WEIGHT_SHARE * data.weight)
+        for found in sets[:1]:
+            chosen, label = simpler(fitter, final, found, parameter_price(data.effective_samples()), self._hold)
+            record = {"effects": found["effects"], "force_rms_N": found["force_rms_N"], "sum_rms_N": found["sum_rms_N"],
+                      "kept": label, "manoeuvre": cancel_manoeuvre(found["effects"])}
+            self.cancelling_.append(record)
+            self.limits_.append({"effects": found["effects"],
+                                 "reason": f"{', '.join(found['effects'])} cancel each other in this flight (each "
+                                           f"{min(found['force_rms_N']):.3g} N rms or more, together "
+                                           f"{found['sum_rms_N']:.3g} N): the flight cannot tell them apart; "
+                                           f"kept: {label}, the simplest account within one parameter's price of "
+                                           "the best held-out score",
+                                 "manoeuvre": record["manoeuvre"]})
+            if chosen is not final:
+                self._say(f"effects that cancel: kept {label}")
+                final = chosen
+        return final
 
     def _wall_edge(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate,
                    selection: Selection) -> Candidate:
@@ -348,7 +377,9 @@ class Discovery:
         self.effects_ = fitted
         self.param_std_ = final.fit.std_dicts()
         written, self.written_notes_ = written_effects([plain_wall(e) for e in self._still_air(fitted, data)])
-        self.model_ = FlightModel(vehicle, written, _written_std(written, fitted, self.param_std_))
+        lag = selection.motor_lag
+        self.model_ = FlightModel(vehicle, written, _written_std(written, fitted, self.param_std_),
+                                  data.vehicle.vehicle_fields(motor_lag_found=bool(lag and lag["kept"])))
         self.flights_ = self._flight_conditions(data, final)
         self.effect_forces_ = {}
         self.where_ = {}
@@ -783,7 +814,7 @@ class Discovery:
         self.notes_.append(reason)
         vehicle = self.logs_[0].vehicle.to_vehicle_params()
         self.effects_, self.param_std_, self.explained_fraction_, self.undetermined_ = [], [], {}, []
-        self.model_ = FlightModel(vehicle, [])
+        self.model_ = FlightModel(vehicle, [], {}, self.logs_[0].vehicle.vehicle_fields())
         self.selection_ = None
         self.final_ = None
         self.motor_lag_ = None
@@ -798,6 +829,7 @@ class Discovery:
         self.noise_ = {"floor_N": float("nan")}
         self.stand_ins_, self.written_notes_ = [], []
         self.wall_edge_ = None
+        self.cancelling_ = []
         if not hasattr(self, "left_out_"):
             self.left_out_ = []
         nan = float("nan")
