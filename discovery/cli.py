@@ -6,6 +6,10 @@
                             [--effect wall_suction] [--closed-loop]
     wall-inspector discover flight.ulg --vehicle vehicle.yaml --scene scene.yaml --out results/
 
+Several logs of one vehicle are fitted together: one model for the vehicle and its
+aerodynamics, each flight with its own conditions (a steady wind) and scene; each flight is
+then held out in turn and predicted by the model fitted on the others.
+
 Writes into ``--out``: ``model.json`` (the nominal vehicle plus the named effects with
 fitted parameters and standard errors; ``gym.make(..., model="model.json")`` and
 ``SCMPC.from_env(env, model="model.json")`` load it), ``report.json`` (see
@@ -38,7 +42,7 @@ from wall_env.effects import EFFECTS
 __all__ = ["add_arguments", "run", "OUTPUT_FILES"]
 
 OUTPUT_FILES = ("model.json", "report.json", "residual_vs_regressor.png", "residual_time.png", "prediction.png",
-                "unexplained_shape.png")
+                "unexplained_shape.png", "unexplained_where.png")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -66,9 +66,12 @@ def _fit_levels(nu: np.ndarray, power: np.ndarray, rounds: int = 5) -> np.ndarra
     squares): every bin counts by its relative error, so the white level is set where it shows (the low
     end of the band) rather than swamped by the differenced noise that grows with frequency."""
     design = np.column_stack([np.ones(len(nu)), 2.0 * (1.0 - np.cos(2 * np.pi * nu))])
+    top = float(np.max(power)) if len(power) else 0.0
+    if not np.isfinite(top) or top <= 1e-200:  # a noise-free log (synthetic): no noise to fit
+        return np.zeros(2)
     levels = nnls(design, power)[0]
     for _ in range(rounds):
-        model = np.maximum(design @ levels, 1e-12 * max(float(power.max()), 1e-300))
+        model = np.maximum(design @ levels, 1e-12 * top)
         levels = nnls(design / model[:, None], power / model)[0]
     return levels
 
@@ -90,7 +93,7 @@ def _refine_peak(data: FlightData, residual: np.ndarray, peak_hz: float, resolut
 
 def _kernel_gains(seg: Segment) -> tuple[float, float]:
     """``sum w^2`` and ``sum (w_j - w_{j+1})^2`` of the segment's interior step weights (zero-padded)."""
-    w = seg.kernel.interior["step"] if seg.kernel.uniform else seg.kernel.edge["step"][seg.n // 2]
+    w = seg.step_weights()
     padded = np.concatenate([[0.0], w, [0.0]])
     return float(np.sum(w**2)), float(np.sum(np.diff(padded) ** 2))
 
@@ -149,8 +152,7 @@ def residual_spectrum(data: FlightData, residual: np.ndarray, floor: dict) -> di
         nu, power = _welch(part, length)
         noise = np.zeros_like(power)
         if np.isfinite(floor.get("floor_N", np.nan)):
-            w = seg.kernel.interior["step"] if seg.kernel.uniform else seg.kernel.edge["step"][seg.n // 2]
-            response = np.abs(np.fft.rfft(w, length)) ** 2
+            response = np.abs(np.fft.rfft(seg.step_weights(), length)) ** 2
             shaped = 2.0 * (1.0 - np.cos(2 * np.pi * nu))
             for a in range(3):
                 noise[:, a] = response * (floor["white_N2"][a] + floor["differenced_N2"][a] * shaped)

@@ -217,7 +217,7 @@ def format_summary(report: dict[str, Any]) -> str:
             lines.append("found nothing: the logs hold no airborne flight to fit (see the notes below)")
         elif report.get("unexplained"):
             lines.append("found no effect of the library that explains the residual (see UNEXPLAINED below)")
-        elif noise is not None and after is not None:
+        elif noise and after is not None:
             lines.append(f"found nothing: the held-out force residual, {after:.4f} N rms, is "
                          f"{after / noise:.2g} times the log's noise floor ({noise:.4f} N, measured from the log): the "
                          "logs agree with the nominal model within noise (no candidate explains "
@@ -227,7 +227,7 @@ def format_summary(report: dict[str, Any]) -> str:
             lines.append("found nothing: no candidate explains "
                          f"{100 * MIN_SHARE:g} % of the held-out residual energy and a force of "
                          f"{100 * MIN_WEIGHT_SHARE:g} % of the weight (the log has no band to measure its noise in)")
-    elif not report.get("unexplained") and noise is not None and after is not None:
+    elif not report.get("unexplained") and noise and after is not None:
         lines.append(f"what is left is noise: the held-out force residual, {after:.4f} N rms, is {after / noise:.2g} "
                      f"times the log's noise floor ({noise:.4f} N)")
     for item in report.get("stand_ins") or []:
@@ -249,6 +249,18 @@ def format_summary(report: dict[str, Any]) -> str:
             lines.append(f"held-out open-loop prediction RMS: {_number(b['prediction_rms_m'])} m -> "
                          f"{_number(a['prediction_rms_m'])} m "
                          f"({_reduction(b['prediction_rms_m'], a['prediction_rms_m'])} smaller)")
+    flights = report.get("flights") or {}
+    for record in flights.get("conditions") or []:
+        winds = "; ".join(f"{name} wind {_fmt(v['w'])} +- {_fmt(v.get('w_std'))} m/s" for name, v in record.items()
+                          if name != "log" and isinstance(v, dict))
+        if winds:
+            lines.append(f"flight {record['log']}: {winds} (its own condition; the model file is for still air)")
+    for record in flights.get("held_out") or []:
+        lines.append(f"held-out flight {record['log']}: force error {record['force_rms_N']:.4f} N rms with the model "
+                     f"fitted on the other flights ({_fmt(record.get('ratio_to_in_sample'))} times its in-sample "
+                     f"{record['in_sample_force_rms_N']:.4f} N"
+                     + (f"; its own {record['conditions_fitted_on_it']} condition entries fitted on it)"
+                        if record.get("conditions_fitted_on_it") else ")"))
     for case in report.get("undetermined") or []:
         lines.append(f"undetermined {case['effect']}.{case['parameter']} = {_fmt(case['value'])} +- "
                      f"{_fmt(case['std'])}: {case['reason']}; {case['action']}; to determine: {case['manoeuvre']}")

@@ -100,11 +100,14 @@ class Segment:
         """Median sample period (s)."""
         return float(np.median(np.diff(self.t)))
 
+    def step_weights(self) -> np.ndarray:
+        """The matched kernel's weights over the steps of a centred window (``K`` of :mod:`discovery.residuals`)."""
+        return self.kernel.interior["step"] if self.kernel.uniform else self.kernel.edge["step"][self.n // 2]
+
     def effective_samples(self) -> float:
         """Independent residual values per axis in this segment: ``n sum(w^2)``, ``w`` the kernel's step weights
         (the smoothing correlates residual values over ``1 / sum(w^2)`` samples)."""
-        weights = self.kernel.interior["step"] if self.kernel.uniform else self.kernel.edge["step"][self.n // 2]
-        return self.n * float(np.sum(weights**2))
+        return self.n * float(np.sum(self.step_weights() ** 2))
 
     def hac_lags(self) -> int:
         """Lags (in fit rows) of a Newey-West sum over this segment: :data:`HAC_WINDOWS` smoothing windows.

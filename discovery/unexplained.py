@@ -179,7 +179,12 @@ def where_it_lives(data: FlightData, residual: np.ndarray, candidates: list[Regr
     variation = residual - level
     noise = floor.get("floor_N", float("nan"))
     steady = bool(np.isfinite(noise) and _rms(variation) <= FLOOR_FACTOR * noise)
-    states = localise_residual(data, variation, candidates)
+    # where the force is (its range, direction, times) is asked of the residual itself when a regressor localises
+    # it there; a residual whose level swamps how it varies is asked of its variation
+    states = localise_residual(data, residual, candidates)
+    if states.get("regressor") in (None, "everywhere") or states.get("range") is None:
+        states = localise_residual(data, variation, candidates)
+        states["direction_world"] = principal_direction(variation)
     position = position_map(data, variation)
     spectrum = residual_spectrum(data, residual, floor) or {}
     periodic = periodic_explained(data, variation, spectrum.get("peak_hz"))

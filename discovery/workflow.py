@@ -15,32 +15,33 @@
 One straight pipeline, each step in its own module:
 
 1. **load** the logs (:mod:`discovery.flight_log`);
-2. **segments**: leave out what is not aerodynamic (held up by the ground or a hand,
-   :mod:`discovery.coverage`) and cut the logs into gap-free segments with their
-   cross-validation folds (:mod:`discovery.residuals`);
+2. **segments**: leave out what is not aerodynamic (held up by the ground or a hand, and the
+   rotors spinning up or down on the ground, :mod:`discovery.coverage`) and cut the logs into
+   gap-free segments with their cross-validation folds (:mod:`discovery.residuals`);
 3. **residuals**: the force residual of paper Eq. 28 at every sample against the nominal
    model (:mod:`discovery.residuals`), and a scene that cannot be right (a rotor behind a
-   wall) corrected or kept away from the effects that depend on it;
+   wall) corrected (a reversed wall normal) or kept away from the effects that depend on it;
 4. **localise**: which candidate regressor the residual depends on, where it is large
    and in which direction (:mod:`discovery.regressors`);
-5. **candidates**: the effects of the library (objects; their fuller forms and an affine
-   thrust map beside them);
+5. **candidates**: the effects of the library (objects; their fuller forms, an affine thrust
+   map, :mod:`discovery.thrust_map`, and a motor lag, :mod:`discovery.motor_lag`, beside them);
 6. **fit** and 7. **select**: every candidate set fitted by least squares and ranked on
    held-out data, added greedily while it pays for itself (:mod:`discovery.selection`,
-   :mod:`discovery.fitting`); what the flight did not determine is nulled or left out and
-   the rest **fitted again** (:mod:`discovery.determination`): the model written is the model
-   scored, and one whose held-out gap is not smaller than the nominal model's is never written;
-8. **report**: the model file (:class:`wall_env.model_file.FlightModel`), the held-out gaps
-   before and after (``force_rms_N``, ``prediction_rms_m``), plots (:mod:`discovery.plots`)
-   and the JSON report (:mod:`discovery.report`).
+   :mod:`discovery.fitting`, one :class:`~discovery.layout.ParameterLayout` per set, each flight
+   with its own wind); what the flight did not determine is nulled or left out and the rest
+   **fitted again** (:mod:`discovery.determination`); effects that cancel each other are
+   look-alikes and the simplest account is kept (:mod:`discovery.cancelling`); a wall that ends
+   gets its suction fitted on its side of the edge (:mod:`discovery.wall_extent`); a model whose
+   held-out gap is not smaller than the nominal model's is never written;
+8. **report**: the log's noise floor (:mod:`discovery.noise`) and what is left beyond it, with
+   where it lives (:mod:`discovery.unexplained`), kept effects that only stood in for it dropped
+   (:mod:`discovery.standins`), the model file (:class:`wall_env.model_file.FlightModel`), the
+   held-out gaps before and after (``force_rms_N``, ``prediction_rms_m``), each flight held out
+   in turn when several were fitted, plots (:mod:`discovery.plots`) and the JSON report
+   (:mod:`discovery.report`).
 
 All held-out figures use the same cross-validation folds: each time block is predicted
-by parameters fitted without it. A significant residual left after the chosen
-effects (its cross-validated bin means against some regressor predict at least
-``unexplained_threshold`` of it) is reported as ``unexplained`` with where it is and its
-shape: the residual along its mean direction, piecewise linear in the localising
-quantity (:func:`discovery.regressors.piecewise_linear`, plotted by
-:mod:`discovery.plots`).
+by parameters fitted without it. The model written is the model scored.
 """
 
 from __future__ import annotations
@@ -462,7 +463,8 @@ class Discovery:
         floor = self.noise_["floor_N"]
         excess = math.sqrt(max(after**2 - floor**2, 0.0)) if math.isfinite(floor) else after
         states = where["states"] if where["states"].get("regressor") not in (None, "everywhere") else left
-        return {"force_rms_N": after, "noise_floor_N": floor, "times_noise_floor": after / floor if floor else None,
+        return {"force_rms_N": after, "noise_floor_N": floor,
+                "times_noise_floor": after / floor if floor and math.isfinite(floor) else None,
                 "excess_rms_N": excess, "share_of_weight": excess / data.weight, "lives_in": where["lives_in"],
                 "where": _public_where(states),
                 "shape": self._shape(states) if where["lives_in"] == "states" or localised else None,
