@@ -262,8 +262,8 @@ def _time_flights(args: argparse.Namespace, folder: Path) -> dict:
     paths = []
     for i, (wx, wy) in enumerate(FLIGHT_WINDS[:args.flights]):
         path = folder / f"wind{i}.csv"
-        drag = "/".join(f"{c:g}" for c in FLIGHTS_DRAG)
-        fly(None, "pid", f"quadratic_drag:C={drag},w={wx:g}/{wy:g}/0", 60 + i, path, scenario="survey",
+        coefficients = "/".join(f"{c:g}" for c in FLIGHTS_DRAG)
+        fly(None, "pid", f"quadratic_drag:C={coefficients},w={wx:g}/{wy:g}/0", 60 + i, path, scenario="survey",
             duration=args.duration)
         paths.append(str(path))
     times = []
