@@ -252,6 +252,7 @@ class Discovery:
         if final.names and self.unexplained_ is not None:
             final = self._without_stand_ins(data, r_nom, final, selection)
         self.notes_ += self.written_notes_
+        self._wind_limit(data, final)
         # the proof against the user's nominal model
         self._say("open-loop predictions")
         vehicle = data.vehicle.to_vehicle_params()
@@ -310,6 +311,23 @@ class Discovery:
                 self._say(f"effects that cancel: kept {label}")
                 final = chosen
         return final
+
+    def _wind_limit(self, data: FlightData, final: Candidate) -> None:
+        """Drag in a wind from one flight: when the wind is fast against the flight's own speed, the drag is nearly
+        ``C w^2 + 2 C w v`` and a coefficient and a wind speed trade off; flights at several winds tell them apart."""
+        effect = next((e for e in final.fit.effects if e.name == "quadratic_drag" and "w" in e.values), None)
+        if effect is None or data.n_flights > 1:
+            return
+        wind = float(np.linalg.norm(effect.values["w"]))
+        speed = float(np.sqrt(np.mean(np.sum(data.concat([seg.states.v_world for seg in data.segments]) ** 2, axis=1))))
+        if wind > 2.0 * speed:
+            self.limits_.append({
+                "effects": ["quadratic_drag"],
+                "reason": f"the wind ({wind:.3g} m/s) is fast against the flight's own speed ({speed:.2g} m/s rms): "
+                          "the drag is then nearly C w^2 along the wind, and from one flight a drag coefficient and a "
+                          "wind speed trade off (only C w^2 is well determined)",
+                "manoeuvre": "fly the same vehicle at several wind speeds (or in still air too) and give all the logs "
+                             "to one discover: the drag coefficient is shared, each flight has its own wind"})
 
     def _wall_edge(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate,
                    selection: Selection) -> Candidate:
@@ -375,9 +393,13 @@ class Discovery:
             if final.problem and final.names else data.concat(r_nom)
         vehicle = data.vehicle.to_vehicle_params()
         fitted = list(final.fit.effects)
-        self.effects_ = fitted
+        # with several flights, each flight's wind is its own condition (flights_): the effects are for still air
+        self.effects_ = self._still_air(fitted, data)
         self.param_std_ = final.fit.std_dicts()
-        written, self.written_notes_ = written_effects([plain_wall(e) for e in self._still_air(fitted, data)])
+        if data.n_flights > 1:
+            self.param_std_ = [{k: ([float("nan")] * len(v) if k == "w" and isinstance(v, list) else v)
+                                for k, v in std.items()} for std in self.param_std_]
+        written, self.written_notes_ = written_effects([plain_wall(e) for e in self.effects_])
         lag = selection.motor_lag
         self.model_ = FlightModel(vehicle, written, _written_std(written, fitted, self.param_std_),
                                   data.vehicle.vehicle_fields(motor_lag_found=bool(lag and lag["kept"])))
@@ -696,21 +718,23 @@ class Discovery:
         return out
 
     # ------------------------------------------------------------------ a fitted model on other flights
-    def _prepared(self, logs: list[FlightLog] | FlightLog) -> FlightData:
-        """``logs`` as the fitted model sees them: ground contact left out, the model's motor lag applied."""
+    def _prepared(self, logs: list[FlightLog] | FlightLog) -> tuple[FlightData, list[int]]:
+        """``logs`` as the fitted model sees them (ground contact left out, the model's motor lag applied), and for
+        each prepared log the index of the log it came from."""
         if not hasattr(self, "final_") or self.final_ is None:
             raise RuntimeError("call fit(logs) before predict or score")
         logs = self._checked(logs)
         tau = self.model_.vehicle.motor_time_constant
-        kept = []
-        for log in logs:
+        kept, origin = [], []
+        for i, log in enumerate(logs):
             resting, contact = ground_contact(log)
             if (~(resting | contact)).sum() >= 2:
                 part = log.select(~(resting | contact))
                 kept.append(replace(part, vehicle=replace(part.vehicle, motor_time_constant=tau)) if tau > 0 else part)
+                origin.append(i)
         if not kept:
             raise ValueError("the logs hold no airborne flight to predict")
-        return prepare(kept, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
+        return prepare(kept, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds), origin
 
     def _forces_on(self, data: FlightData, conditions: dict[str, dict[str, Any]] | None
                    ) -> tuple[list[np.ndarray], list[np.ndarray], list[dict]]:
@@ -755,19 +779,19 @@ class Discovery:
         ``quadratic_drag`` with wind) are taken from ``conditions`` (``{"quadratic_drag": {"w": [...]}}``) or,
         when not given, fitted on the flight itself with everything else held (:attr:`conditions_` says which)."""
         logs = [logs] if isinstance(logs, FlightLog) else list(logs)
-        data = self._prepared(logs)
+        data, origin = self._prepared(logs)
         r_nom, residual, self.conditions_ = self._forces_on(data, conditions)
         out = [np.full((log.n_samples, 3), np.nan) for log in logs]
-        for seg, measured, left in zip(data.segments, (s.measured_force for s in data.segments), residual):
-            rows = np.searchsorted(logs[seg.log_index].t, seg.t)
-            out[seg.log_index][rows] = measured - left
+        for seg, left in zip(data.segments, residual):
+            log = origin[seg.log_index]
+            out[log][np.searchsorted(logs[log].t, seg.t)] = seg.measured_force - left
         return np.concatenate(out)
 
     def score(self, logs: list[FlightLog] | FlightLog, conditions: dict[str, dict[str, Any]] | None = None) -> float:
         """The share of the nominal model's force-gap energy the fitted model explains on ``logs``: 1 for a perfect
         model, 0 for one no better than the nominal, negative for a worse one (the scikit-learn convention: higher
         is better). Conditions as in :meth:`predict`."""
-        data = self._prepared(logs)
+        data, _ = self._prepared(logs)
         r_nom, residual, self.conditions_ = self._forces_on(data, conditions)
         before = float(np.sum(data.concat(r_nom) ** 2))
         return 1.0 - float(np.sum(data.concat(residual) ** 2)) / before if before > 0 else 0.0

@@ -161,3 +161,22 @@ def test_an_affine_thrust_map_is_one_candidate(tmp_path):
     assert set(written) == {"thrust_scale", "constant_force"}
     assert written["constant_force"].values["F"] == pytest.approx([0.0, 0.0, found.effects_[0].values["offset"][0]])
     assert any("affine thrust map is written" in note for note in found.notes_)
+
+
+def test_effects_that_cancel_near_hover_are_reported_as_look_alikes(tmp_path):
+    """A thrust 20 % strong and a 2.55 N downward force cancel at hover (20 % of the 12.75 N weight). Both are there,
+    and the brisk flight tells them apart (its tilt separates a world-vertical force from the body-z thrust), so
+    both are kept; the report names them as effects that cancel, with the manoeuvre that separates them."""
+    effects = {"thrust_scale": 1.2, "wind_force": [0.0, 0.0, -0.2 * WEIGHT]}
+    found = Discovery().fit(read_log(_log(tmp_path, "cancel", effects, 311)))
+    assert sorted(found.names_) == ["constant_force", "thrust_scale"]
+    fitted = {e.name: e.values for e in found.effects_}
+    assert fitted["thrust_scale"]["scale"][0] == pytest.approx(1.2, rel=0.02)
+    assert fitted["constant_force"]["F"][2] == pytest.approx(-0.2 * WEIGHT, rel=0.05)
+    record = found.cancelling_[0]
+    assert sorted(record["effects"]) == ["constant_force", "thrust_scale"]
+    assert record["sum_rms_N"] < 0.3 * max(record["force_rms_N"])
+    assert "climb and descend" in record["manoeuvre"]
+    limit = next(x for x in found.limits_ if sorted(x["effects"]) == ["constant_force", "thrust_scale"]
+                 and "cancel each other" in x["reason"])
+    assert "kept: the kept effects" in limit["reason"]
