@@ -176,7 +176,14 @@ def structure_for(data: FlightData, where: dict, candidates: list[Regressor]) ->
         return None
     direction = np.asarray(where.get("direction_world") or (0.0, 0.0, 1.0), dtype=float)
     basis = _along(columns, direction / np.linalg.norm(direction))
-    structure = Structure(size=basis.shape[2], label=label, zero=lives == "states" and "zero at" in label)
+    zero = lives == "states" and "zero at" in label
+    if lives in ("states", "position") and not zero:
+        # its level is its own, along every world axis (the residual's main direction is only estimated): the
+        # shape along that direction less one of its functions (they sum to one), and a constant per axis
+        level = np.zeros((len(columns), 3, 3))
+        level[:, 0, 0] = level[:, 1, 1] = level[:, 2, 2] = 1.0
+        basis = np.concatenate([basis[:, :, :-1], level], axis=2)
+    structure = Structure(size=basis.shape[2], label=label, zero=zero)
     structure.basis = _split(data, basis)
     return structure
 
