@@ -12,17 +12,24 @@ from the bounds of its range. Nothing undetermined goes into the model file:
   undetermined is left out altogether.
 
 Each such case is reported with the manoeuvre that would determine it
-(:data:`MANOEUVRES`).
+(:data:`MANOEUVRES`). :func:`refit_determined` fits what is left again, so the model file holds
+the values of the model that was scored, not those of a joint fit with what was dropped.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from wall_env.effects import Effect
 
+if TYPE_CHECKING:
+    from discovery.fitting import Candidate, Fitter
+
 __all__ = ["Z_95", "NULL_VALUES", "NULL_BY_EFFECT", "null_value", "MANOEUVRES", "Undetermined", "undetermined_cases",
-           "restrict", "determined",
+           "restrict", "determined", "entry", "nothing_left", "open_cases", "refit_determined",
            "determining_manoeuvre", "separating_manoeuvre"]
 
 Z_95 = 1.96
@@ -165,3 +172,72 @@ SEPARATING = {
 def separating_manoeuvre(a: str, b: str) -> str:
     """The flight that tells effect ``a`` from effect ``b``."""
     return SEPARATING.get(frozenset({a, b}), f"fly where {a} acts and {b} does not (and the other way round)")
+
+
+def entry(effect: Effect, name: str, index: int | None) -> int:
+    """Position of parameter ``name`` (entry ``index`` of a vector) in ``effect``'s own parameter vector."""
+    position = 0
+    for p in effect.parameters:
+        if p.name == name:
+            return position + (index or 0)
+        position += p.size
+    raise KeyError(f"{effect.name} has no parameter {name}")
+
+
+def nothing_left(effect: Effect, held: dict[int, float]) -> bool:
+    """Whether every entry of ``effect``'s first parameter is held at its null value: then the effect puts no force
+    on the vehicle whatever its other parameters (a drag with every coefficient at zero has no use for a wind)."""
+    first = effect.parameters[0]
+    null = null_value(effect.name, first.name)
+    return null is not None and all(held.get(i) == null for i in range(first.size))
+
+
+def open_cases(candidate: Candidate, hold: dict[str, dict[int, float]]) -> list[Undetermined]:
+    """The undetermined entries of a fitted candidate set not already held (:func:`undetermined_cases`); with several
+    flights, a flight's own entry (its wind) counts when it is undetermined in every flight."""
+    fit = candidate.fit
+    if not candidate.names:
+        return []
+    held = {(e.name, i) for k, e in zip(candidate.names, fit.effects) for i in hold.get(k, {})}
+    out = []
+    for case in undetermined_cases(fit.effects, fit.std_dicts()):
+        effect = next(e for e in fit.effects if e.name == case["effect"])
+        if (effect.name, entry(effect, case["name"], case["index"])) in held:
+            continue
+        layout = fit.layout
+        if layout is not None and layout.n_flights > 1 and case["name"] == "w":
+            others = [undetermined_cases(fit.flight_effects(f), fit.std_dicts(f)) for f in range(1, layout.n_flights)]
+            if not all(any(c["effect"] == case["effect"] and c["parameter"] == case["parameter"] for c in other)
+                       for other in others):
+                continue  # determined in another flight
+        out.append(case)
+    return out
+
+
+def refit_determined(fitter: Fitter | None, chosen: Candidate, say: Callable[[str], None] | None = None
+                     ) -> tuple[Candidate, dict[str, dict[int, float]], list[Undetermined]]:
+    """Only what the flight determined, fitted again: undetermined entries held at their null value and effects
+    whose main parameter is undetermined dropped, the rest refitted and scored again by ``fitter``
+    (:class:`~discovery.fitting.Fitter`), until nothing more is undetermined. Returns the final candidate set,
+    the entries held (``{key: {entry: value}}``) and every case found on the way."""
+    current, found = chosen, []
+    hold: dict[str, dict[int, float]] = {}
+    for _ in range(len(chosen.names) + 2):
+        cases = open_cases(current, hold)
+        if not cases or fitter is None:
+            break
+        found += cases
+        dropped = {c["effect"] for c in cases if c["action"].startswith("effect left out")}
+        keys = [k for k, e in zip(current.names, current.fit.effects) if e.name not in dropped]
+        for c in cases:
+            if c["effect"] in dropped:
+                continue
+            key, effect = next((k, e) for k, e in zip(current.names, current.fit.effects) if e.name == c["effect"])
+            null = null_value(effect.name, c["name"])
+            hold.setdefault(key, {})[entry(effect, c["name"], c["index"])] = 0.0 if null is None else null
+        hold = {k: v for k, v in hold.items() if k in keys}
+        keys = [k for k in keys if not nothing_left(fitter.templates[k], hold.get(k, {}))]
+        if say is not None:
+            say(f"fitting again without what the flight did not determine: {', '.join(keys) or 'nothing'}")
+        current = fitter.candidate(keys, previous=current.previous(), hold=hold)
+    return current, hold, found

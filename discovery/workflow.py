@@ -57,9 +57,10 @@ from threadpoolctl import threadpool_limits
 from discovery.cancelling import cancelling_sets, simpler
 from discovery.cancelling import manoeuvre as cancel_manoeuvre
 from discovery.coverage import CONTACT_HEIGHT, REST_THRUST_SHARE, flight_limits, ground_contact, scene_problems
-from discovery.determination import determining_manoeuvre, null_value, undetermined_cases
+from discovery.determination import determining_manoeuvre, refit_determined
 from discovery.fitting import Candidate, EffectFit
 from discovery.flight_log import FlightLog
+from discovery.flights import conditions, model_on, still_air
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG
 from discovery.noise import noise_floor
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
@@ -241,16 +242,19 @@ class Discovery:
         self.noise_ = noise_floor(data)
         self.stand_ins_: list[dict] = []
         self.withheld_: dict[str, Any] | None = None
-        final = self._never_worse(data, r_nom, self._determined(data, r_nom, selection), selection)
+        final, self._hold, self.undetermined_ = refit_determined(selection.fitter, selection.chosen, self._say)
         final = self._cancelling(data, final, selection)
-        final = self._wall_edge(data, r_nom, final, selection)
+        final = self._never_worse(data, r_nom, self._wall_edge(data, r_nom, final, selection), selection)
         self._finish(data, r_nom, final, selection)
         # a kept effect that only stands in for a structure the library cannot describe is not written as physics;
         # asked only when something is left: a one-parameter effect that leaves nothing but noise is the simpler
         # account of its residual than any shape-free description (on a sinusoidal flight a thrust scale's force
         # is also a function of the position)
         if final.names and self.unexplained_ is not None:
-            final = self._without_stand_ins(data, r_nom, final, selection)
+            kept = self._without_stand_ins(data, r_nom, final, selection)
+            final = self._never_worse(data, r_nom, kept, selection)
+            if final is not kept:
+                self._finish(data, r_nom, final, selection)
         self.notes_ += self.written_notes_
         self._wind_limit(data, final)
         # the proof against the user's nominal model
@@ -394,7 +398,7 @@ class Discovery:
         vehicle = data.vehicle.to_vehicle_params()
         fitted = list(final.fit.effects)
         # with several flights, each flight's wind is its own condition (flights_): the effects are for still air
-        self.effects_ = self._still_air(fitted, data)
+        self.effects_ = still_air(fitted, data.n_flights)
         self.param_std_ = final.fit.std_dicts()
         if data.n_flights > 1:
             self.param_std_ = [{k: ([float("nan")] * len(v) if k == "w" and isinstance(v, list) else v)
@@ -403,7 +407,7 @@ class Discovery:
         lag = selection.motor_lag
         self.model_ = FlightModel(vehicle, written, _written_std(written, fitted, self.param_std_),
                                   data.vehicle.vehicle_fields(motor_lag_found=bool(lag and lag["kept"])))
-        self.flights_ = self._flight_conditions(data, final)
+        self.flights_ = conditions(data, final)
         self.effect_forces_ = {}
         self.where_ = {}
         if final.problem is not None and final.names:
@@ -606,117 +610,6 @@ class Discovery:
                           "flight cannot tell the lag from that effect",
                 "manoeuvre": determining_manoeuvre(LAG_KEY, "time_constant")})
 
-    def _determined(self, data: FlightData, r_nom: list[np.ndarray], selection: Selection) -> Candidate:
-        """Only what the flight determined, fitted again: undetermined entries are held at their null value
-        and effects whose main parameter is undetermined dropped, the rest refitted and scored again, until
-        nothing more is undetermined (:mod:`discovery.determination`). The cases go to ``undetermined_``."""
-        current = selection.chosen
-        fitter = selection.fitter
-        self.undetermined_ = []
-        hold: dict[str, dict[int, float]] = {}
-        self._hold = hold
-        for _ in range(len(current.names) + 2):
-            cases = self._cases(current, hold)
-            if not cases or fitter is None:
-                break
-            self.undetermined_ += cases
-            dropped = {c["effect"] for c in cases if c["action"].startswith("effect left out")}
-            keys = [k for k, e in zip(current.names, current.fit.effects) if e.name not in dropped]
-            for c in cases:
-                if c["effect"] in dropped:
-                    continue
-                key = next(k for k, e in zip(current.names, current.fit.effects) if e.name == c["effect"])
-                effect = next(e for e in current.fit.effects if e.name == c["effect"])
-                null = null_value(effect.name, c["name"])
-                hold.setdefault(key, {})[_entry(effect, c["name"], c["index"])] = 0.0 if null is None else null
-            hold = {k: v for k, v in hold.items() if k in keys}
-            # every entry of an effect's first parameter (its coefficient, force or gain) held at its null: nothing
-            # is left of it
-            keys = [k for k in keys if not _nothing_left(fitter.templates[k], hold.get(k, {}))]
-            if dropped or keys != current.names or hold:
-                self._say(f"fitting again without what the flight did not determine: {', '.join(keys) or 'nothing'}")
-            current = fitter.candidate(keys, previous=current.previous(), hold=hold)
-        self._hold = hold
-        return current
-
-    def _cases(self, candidate: Candidate, hold: dict[str, dict[int, float]]) -> list:
-        """Undetermined entries of ``candidate`` not already held (for several flights: a flight's own entry counts
-        when it is undetermined in every flight)."""
-        fit = candidate.fit
-        if not candidate.names:
-            return []
-        cases = undetermined_cases(fit.effects, fit.std_dicts())
-        held = {(e.name, entry) for k, e in zip(candidate.names, fit.effects) for entry in hold.get(k, {})}
-        out = []
-        layout = fit.layout
-        for case in cases:
-            effect = next(e for e in fit.effects if e.name == case["effect"])
-            if (effect.name, _entry(effect, case["name"], case["index"])) in held:
-                continue
-            if layout is not None and layout.n_flights > 1 and case["name"] in {"w"}:
-                others = [undetermined_cases(fit.flight_effects(f), fit.std_dicts(f)) for f in range(1, layout.n_flights)]
-                if not all(any(c["effect"] == case["effect"] and c["parameter"] == case["parameter"] for c in other)
-                           for other in others):
-                    continue  # determined in another flight
-            out.append(case)
-        return out
-
-    def _still_air(self, effects: list[Effect], data: FlightData) -> list[Effect]:
-        """The effects for the model file: with several flights, each flight's wind is a condition of that flight
-        (in the report), and the model file is for still air."""
-        if data.n_flights <= 1:
-            return list(effects)
-        out = []
-        for effect in effects:
-            if "w" in effect.values:
-                values = {**effect.params_dict(), "w": [0.0, 0.0, 0.0]}
-                effect = type(effect)(**values, **effect.option_values)
-            out.append(effect)
-        return out
-
-    def _flight_conditions(self, data: FlightData, final: Candidate) -> dict:
-        """Each flight's own conditions (its wind) with their standard errors, when several flights were fitted."""
-        layout = final.fit.layout
-        if layout is None or data.n_flights <= 1:
-            return {"conditions": [], "held_out": []}
-        sources = []
-        for f in range(data.n_flights):
-            sources.append(next(seg.source for seg in data.segments if seg.flight == f))
-        conditions = []
-        for f in range(data.n_flights):
-            record: dict[str, Any] = {"log": sources[f]}
-            for effect, std in zip(final.fit.flight_effects(f), final.fit.std_dicts(f)):
-                if "w" in effect.values:
-                    record[effect.name] = {"w": [float(x) for x in effect.values["w"]], "w_std": std.get("w")}
-            conditions.append(record)
-        return {"conditions": conditions, "held_out": self._held_out_flights(data, final, sources)}
-
-    def _held_out_flights(self, data: FlightData, final: Candidate, sources: list[str]) -> list[dict]:
-        """Each flight predicted by the model fitted on the others: the shared parameters (the vehicle's and the
-        aerodynamics') from the other flights, the held-out flight's own conditions (its wind) fitted on it
-        alone. Its force error (rms, at the fit rows) against the full fit's error on it."""
-        problem, fit = final.problem, final.fit
-        if problem is None or not final.names or fit.layout is None:
-            return []
-        held = fit.held if fit.held is not None else np.zeros(problem.size, dtype=bool)
-        inside = problem.residuals(fit.theta)
-        out = []
-        for f in range(data.n_flights):
-            others = [np.full(len(rows), seg.flight != f) for seg, rows in zip(data.segments, problem.rows)]
-            mine = [~m for m in others]
-            if not any(m.any() for m in others):
-                continue
-            shared = problem.fit(masks=others, theta0=fit.theta, held=held).theta
-            own = fit.layout.flight_entries(f) & ~held
-            theta = problem._solve(shared, mine, free=own).x if own.any() else shared
-            predicted = problem.residuals(theta)
-            held_out = _rms(np.concatenate([r[m] for r, m in zip(predicted, mine)]))
-            in_sample = _rms(np.concatenate([r[m] for r, m in zip(inside, mine)]))
-            out.append({"log": sources[f], "force_rms_N": held_out, "in_sample_force_rms_N": in_sample,
-                        "ratio_to_in_sample": held_out / in_sample if in_sample > 0 else None,
-                        "conditions_fitted_on_it": int(own.sum())})
-        return out
-
     # ------------------------------------------------------------------ a fitted model on other flights
     def _prepared(self, logs: list[FlightLog] | FlightLog) -> tuple[FlightData, list[int]]:
         """``logs`` as the fitted model sees them (ground contact left out, the model's motor lag applied), and for
@@ -736,63 +629,37 @@ class Discovery:
             raise ValueError("the logs hold no airborne flight to predict")
         return prepare(kept, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds), origin
 
-    def _forces_on(self, data: FlightData, conditions: dict[str, dict[str, Any]] | None
-                   ) -> tuple[list[np.ndarray], list[np.ndarray], list[dict]]:
-        """The final model on ``data``: per segment the nominal residual and the model's residual, and each
-        flight's conditions (given, or fitted on the flight with the shared parameters held)."""
+    def _final_templates(self) -> list[Effect]:
         assert self.final_ is not None
-        final = self.final_
-        nominal = FlightModel(data.vehicle.to_vehicle_params(), []).aero_model()
-        r_nom = data.residuals(nominal)
-        if not final.names:
-            return r_nom, r_nom, [{} for _ in range(data.n_flights)]
-        templates = [self.selection_.fitter.templates[k] for k in final.names] if self.selection_ and \
-            self.selection_.fitter else list(final.fit.effects)
-        problem = EffectFit(data, templates, r_nom, None, list(final.names))
-        layout, fitted = problem.layout, final.fit
-        theta = layout.pack({k: e.param_vector() for k, e in zip(final.names, fitted.effects)})
-        own = np.zeros(layout.size, dtype=bool)
-        for e, effect in enumerate(layout.templates):
-            for f in range(layout.n_flights):
-                rows = layout.index[e][f]
-                for position, parameter in zip(rows, _entry_names(effect)):
-                    if parameter != "w":
-                        continue
-                    given = (conditions or {}).get(effect.name, {}).get("w")
-                    if given is not None:
-                        theta[position] = float(np.asarray(given, dtype=float)[_component(effect, position - rows[0])])
-                    elif not (fitted.held is not None and fitted.held.size and _held_w(fitted, e)):
-                        own[position] = True
-        if own.any():
-            theta = problem._solve(theta, [np.ones(len(r), dtype=bool) for r in problem.rows], free=own).x
-        residual = problem.out_of_fold([theta] * data.n_folds, r_nom)
-        used = [{e.name: e.params_dict() for e in layout.effects(theta, f) if "w" in e.values}
-                for f in range(data.n_flights)]
-        return r_nom, residual, used
+        fitter = self.selection_.fitter if self.selection_ is not None else None
+        return [fitter.templates[k] for k in self.final_.names] if fitter else list(self.final_.fit.effects)
 
-    def predict(self, logs: list[FlightLog] | FlightLog, conditions: dict[str, dict[str, Any]] | None = None
+    def predict(self, logs: list[FlightLog] | FlightLog, given: dict[str, dict[str, Any]] | None = None
                 ) -> np.ndarray:
         """The aerodynamic force (N, world frame, smoothed as the residual is) the fitted model predicts at every
         sample of ``logs`` (concatenated), NaN where a sample is left out (ground contact, a segment too short).
 
         The model's shared parameters are used as fitted; a flight's own conditions (a steady wind of
-        ``quadratic_drag`` with wind) are taken from ``conditions`` (``{"quadratic_drag": {"w": [...]}}``) or,
-        when not given, fitted on the flight itself with everything else held (:attr:`conditions_` says which)."""
+        ``quadratic_drag`` with wind) are taken from ``given`` (``{"quadratic_drag": {"w": [...]}}``) or, when not
+        given, fitted on the flight itself with everything else held (:attr:`conditions_` says which,
+        :func:`discovery.flights.model_on`)."""
         logs = [logs] if isinstance(logs, FlightLog) else list(logs)
         data, origin = self._prepared(logs)
-        r_nom, residual, self.conditions_ = self._forces_on(data, conditions)
+        assert self.final_ is not None
+        r_nom, residual, self.conditions_ = model_on(data, self.final_, self._final_templates(), given)
         out = [np.full((log.n_samples, 3), np.nan) for log in logs]
         for seg, left in zip(data.segments, residual):
             log = origin[seg.log_index]
             out[log][np.searchsorted(logs[log].t, seg.t)] = seg.measured_force - left
         return np.concatenate(out)
 
-    def score(self, logs: list[FlightLog] | FlightLog, conditions: dict[str, dict[str, Any]] | None = None) -> float:
+    def score(self, logs: list[FlightLog] | FlightLog, given: dict[str, dict[str, Any]] | None = None) -> float:
         """The share of the nominal model's force-gap energy the fitted model explains on ``logs``: 1 for a perfect
         model, 0 for one no better than the nominal, negative for a worse one (the scikit-learn convention: higher
-        is better). Conditions as in :meth:`predict`."""
+        is better). ``given`` as in :meth:`predict`."""
         data, _ = self._prepared(logs)
-        r_nom, residual, self.conditions_ = self._forces_on(data, conditions)
+        assert self.final_ is not None
+        r_nom, residual, self.conditions_ = model_on(data, self.final_, self._final_templates(), given)
         before = float(np.sum(data.concat(r_nom) ** 2))
         return 1.0 - float(np.sum(data.concat(residual) ** 2)) / before if before > 0 else 0.0
 
@@ -880,47 +747,6 @@ class Discovery:
         if not hasattr(self, "effects_"):
             return f"Discovery(candidates={self.candidates}, effect={self.effect})"
         return f"Discovery(found={self.names_}, gap_before={self.gap_before_}, gap_after={self.gap_after_})"
-
-
-def _entry_names(effect: Effect) -> list[str]:
-    """The parameter name of every entry of ``effect``'s own vector."""
-    return [p.name for p in effect.parameters for _ in range(p.size)]
-
-
-def _component(effect: Effect, position: int) -> int:
-    """Entry ``position`` of ``effect``'s own vector as the component of its parameter."""
-    for p in effect.parameters:
-        if position < p.size:
-            return position
-        position -= p.size
-    raise IndexError(position)
-
-
-def _held_w(fit, effect_index: int) -> bool:
-    """Whether every wind entry of effect ``effect_index`` was held (undetermined) in ``fit``."""
-    layout = fit.layout
-    rows = layout.index[effect_index][0]
-    names = _entry_names(layout.templates[effect_index])
-    wind = [r for r, n in zip(rows, names) if n == "w"]
-    return bool(wind) and bool(np.all(fit.held[wind]))
-
-
-def _entry(effect: Effect, name: str, index: int | None) -> int:
-    """Position of parameter ``name`` (entry ``index`` of a vector) in ``effect``'s own parameter vector."""
-    position = 0
-    for p in effect.parameters:
-        if p.name == name:
-            return position + (index or 0)
-        position += p.size
-    raise KeyError(f"{effect.name} has no parameter {name}")
-
-
-def _nothing_left(effect: Effect, held: dict[int, float]) -> bool:
-    """Whether every entry of ``effect``'s first parameter is held at its null value: then the effect puts no force
-    on the vehicle whatever its other parameters (a drag with every coefficient at zero has no use for a wind)."""
-    first = effect.parameters[0]
-    null = null_value(effect.name, first.name)
-    return null is not None and all(held.get(i) == null for i in range(first.size))
 
 
 def _written_std(written: list[Effect], fitted: list[Effect], stds: list[dict]) -> dict[str, dict]:

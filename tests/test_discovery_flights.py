@@ -68,8 +68,8 @@ def test_flights_at_several_winds_determine_the_drag_and_each_wind(tmp_path, cap
     assert found.conditions_[0]["quadratic_drag"]["w"] == pytest.approx(WINDS[3], abs=0.3)  # fitted on the flight
     assert found.score(fourth) > 0.9
     # with the wind given instead of fitted
-    assert found.score(fourth, conditions={"quadratic_drag": {"w": WINDS[3]}}) > 0.9
-    assert found.score(fourth, conditions={"quadratic_drag": {"w": [0.0, 0.0, 0.0]}}) < 0.5
+    assert found.score(fourth, given={"quadratic_drag": {"w": WINDS[3]}}) > 0.9
+    assert found.score(fourth, given={"quadratic_drag": {"w": [0.0, 0.0, 0.0]}}) < 0.5
 
 
 def test_candidates_are_effect_objects_and_predict_needs_a_fit(tmp_path):
