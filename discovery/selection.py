@@ -134,9 +134,7 @@ def make_fitter(data: FlightData, r_nom: list[np.ndarray], templates: dict[str, 
     def scorer(mse_axes: np.ndarray, layout: ParameterLayout, held: np.ndarray) -> float:
         return score(mse_axes, priced(layout, held), n)
 
-    fitter = Fitter(data, r_nom, templates, scorer)
-    fitter.n_eff = n  # type: ignore[attr-defined]
-    return fitter
+    return Fitter(data, r_nom, templates, scorer)
 
 
 def priced(layout: ParameterLayout, held: np.ndarray | None = None) -> int:
@@ -215,8 +213,8 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     templates = _with_variants(base, VARIANTS if variants is None else variants)
     n_eff = effective_samples(data)
     price = parameter_price(n_eff)
-    evaluator = make_fitter(data, r_nom, templates, n_eff)
-    nominal = evaluator.candidate([])
+    fitter = make_fitter(data, r_nom, templates, n_eff)
+    nominal = fitter.candidate([])
     current = nominal
     steps: list[Step] = []
     alike: list[dict] = []
@@ -242,7 +240,7 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
                 continue  # a fuller form is worth fitting only where its plain form already helps
             if progress is not None:
                 progress(f"trying {' + '.join(current.names + [key])}")
-            cand = evaluator.candidate(current.names + [key], previous=current.previous())
+            cand = fitter.candidate(current.names + [key], previous=current.previous())
             gain = 1.0 - cand.mse / current.mse if current.mse > 0 else 0.0
             usable = cand.score < current.score and material(cand, current) and _extra_determined(cand, key)
             tried.append({"name": key, "cv_mse_N2": cand.mse, "gain": gain, "score": cand.score,
@@ -265,25 +263,25 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
                               "explained_alike": round((current.mse - other.mse) / nominal.mse, 4)})
         steps.append(Step(tried, best.names[-1], current.mse, best.mse))
         current = best
-    current, removed = _backward(evaluator, current, material)
-    refined, swaps = _refine_forms(evaluator, current)
+    current, removed = _backward(fitter, current, material)
+    refined, swaps = _refine_forms(fitter, current)
     if swaps:  # another form may leave a companion effect nothing to explain
-        current, dropped = _backward(evaluator, refined, material)
+        current, dropped = _backward(fitter, refined, material)
         removed += dropped
     if "quadratic_drag" in base and variants is None:
-        current = _drag_in_wind(evaluator, current, base["quadratic_drag"], progress)
-    explained = _sequential_explained(evaluator, current, nominal)
+        current = _drag_in_wind(fitter, current, base["quadratic_drag"], progress)
+    explained = _sequential_explained(fitter, current, nominal)
     explained = {effect_name(k): v for k, v in explained.items()}
     chosen_names = {effect_name(k) for k in current.names}
     alike = [a for a in alike if a["chosen"] in chosen_names]
     forms = [{"effect": effect_name(k), "form": k, **({"chosen_first_as": swaps[k]} if k in swaps else {})}
              for k in current.names]
-    form_limits = _form_limits(evaluator, current)
-    lag = _motor_lag(evaluator, current, nominal, progress) if look_for_lag else None
-    return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms, form_limits, lag, evaluator)
+    form_limits = _form_limits(fitter, current)
+    lag = _motor_lag(fitter, current, nominal, progress) if look_for_lag else None
+    return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms, form_limits, lag, fitter)
 
 
-def _motor_lag(evaluator: Fitter, current: Candidate, nominal: Candidate, progress) -> dict:
+def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, progress) -> dict:
     """A motor lag fitted jointly with the chosen effects (:mod:`discovery.motor_lag`), and whether it counts.
 
     It counts when it lowers the held-out score and its 95 % interval is away from zero and from
@@ -305,17 +303,17 @@ def _motor_lag(evaluator: Fitter, current: Candidate, nominal: Candidate, progre
     from discovery.determination import undetermined_cases
 
     scale = [float(e.values["scale"][0]) for e in current.fit.effects if e.name == "thrust_scale"]
-    template = MotorLag(segments=len(evaluator.data.segments), thrust_scale=scale[0] if scale else 1.0)
-    evaluator.add(LAG_KEY, template)
+    template = MotorLag(segments=len(fitter.data.segments), thrust_scale=scale[0] if scale else 1.0)
+    fitter.add(LAG_KEY, template)
     if progress is not None:
         progress(f"trying {' + '.join(current.names + [LAG_KEY])}")
-    cand = evaluator.candidate(current.names + [LAG_KEY], previous=current.previous())
+    cand = fitter.candidate(current.names + [LAG_KEY], previous=current.previous())
     lag, std = cand.fit.effects[-1], cand.fit.std_dicts()[-1]
     tau, tau_std = float(lag.values["time_constant"][0]), float(std["time_constant"])
     cases = [c for c in undetermined_cases([lag], [std]) if c["name"] == "time_constant"]  # start errors: nuisance
     assert cand.problem is not None
     term = cand.problem.terms[-1]
-    forces = [term.at_rows(s, lag.param_vector())[0] for s in range(len(evaluator.data.segments))]
+    forces = [term.at_rows(s, lag.param_vector())[0] for s in range(len(fitter.data.segments))]
     force_rms = float(np.sqrt(np.mean(np.sum(np.concatenate(forces) ** 2, axis=1))))
     if cand.score >= current.score:
         reason = "it does not lower the held-out score"
@@ -350,7 +348,7 @@ def _moves(current: Candidate, with_lag: Candidate) -> dict | None:
     return best
 
 
-def _refine_forms(evaluator: Fitter, current: Candidate) -> tuple[Candidate, dict[str, str]]:
+def _refine_forms(fitter: Fitter, current: Candidate) -> tuple[Candidate, dict[str, str]]:
     """Each chosen effect in the form that scores best next to all the others.
 
     A round of forward selection weighs an effect's forms against the model of that round
@@ -367,10 +365,10 @@ def _refine_forms(evaluator: Fitter, current: Candidate) -> tuple[Candidate, dic
     while True:
         best = current
         for key in current.names:
-            for form in (k for k in evaluator.templates if effect_name(k) == effect_name(key) and k != key):
+            for form in (k for k in fitter.templates if effect_name(k) == effect_name(key) and k != key):
                 names = [form if k == key else k for k in current.names]
                 previous = {k: v for k, v in current.previous().items() if k != key}
-                cand = evaluator.candidate(names, previous=previous)
+                cand = fitter.candidate(names, previous=previous)
                 if cand.score < best.score and _extra_determined(cand, form):
                     best, swap = cand, (key, form)
         if best is current:
@@ -379,7 +377,7 @@ def _refine_forms(evaluator: Fitter, current: Candidate) -> tuple[Candidate, dic
         current = best
 
 
-def _form_limits(evaluator: Fitter, current: Candidate) -> list[dict]:
+def _form_limits(fitter: Fitter, current: Candidate) -> list[dict]:
     """Why each chosen effect kept its plain form where the literature has a fuller one (the ground and
     ceiling effects' distance offset, wall suction scaled by rotor thrust), with the manoeuvre that
     would tell them apart, as
@@ -392,12 +390,12 @@ def _form_limits(evaluator: Fitter, current: Candidate) -> list[dict]:
 
     out = []
     for key in current.names:
-        for form in (k for k in evaluator.templates if "[" in k and effect_name(k) == key):
-            effect = evaluator.templates[form]
+        for form in (k for k in fitter.templates if "[" in k and effect_name(k) == key):
+            effect = fitter.templates[form]
             extra = _extra_parameters(effect)
             options = _switched_options(effect)
             names = [form if k == key else k for k in current.names]
-            fuller = evaluator.candidate(names, previous={k: v for k, v in current.previous().items() if k != key})
+            fuller = fitter.candidate(names, previous={k: v for k, v in current.previous().items() if k != key})
             index = names.index(form)
             fitted, std = fuller.fit.effects[index], fuller.fit.std_dicts()[index]
             open_ = {c["name"] for c in undetermined_cases([fitted], [std])}
@@ -421,14 +419,14 @@ def _form_limits(evaluator: Fitter, current: Candidate) -> list[dict]:
     return out
 
 
-def _drag_in_wind(evaluator: Fitter, current: Candidate, template: Effect, progress) -> Candidate:
+def _drag_in_wind(fitter: Fitter, current: Candidate, template: Effect, progress) -> Candidate:
     """Quadratic drag on the air-relative velocity with a fitted wind (each flight's own), in place of any chosen
     subset of :data:`WIND_REPLACES`, where it scores better and its wind is determined."""
     replaceable = [k for k in current.names if k in WIND_REPLACES]
     if not replaceable:
         return current
     key = variant_key("quadratic_drag", {"wind": True})
-    evaluator.add(key, make_candidate("quadratic_drag", **{**template.option_values, "wind": True}))
+    fitter.add(key, make_candidate("quadratic_drag", **{**template.option_values, "wind": True}))
     best = current
     for size in range(1, len(replaceable) + 1):
         for dropped in _subsets(replaceable, size):
@@ -440,7 +438,7 @@ def _drag_in_wind(evaluator: Fitter, current: Candidate, template: Effect, progr
             previous = {k: v for k, v in current.previous().items() if k in names}
             if "quadratic_drag" in dropped:
                 previous[key] = np.concatenate([current.previous()["quadratic_drag"], np.zeros(3)])
-            cand = evaluator.candidate(names, previous=previous)
+            cand = fitter.candidate(names, previous=previous)
             if cand.score < best.score and _extra_determined(cand, key):
                 best = cand
     return best
@@ -469,7 +467,7 @@ def _extra_determined(candidate: Candidate, key: str) -> bool:
     return sum(1 for c in cases if c["name"] in {p.name for p in extra}) < sum(p.size for p in extra)
 
 
-def _backward(evaluator: Fitter, current: Candidate, material) -> tuple[Candidate, list[str]]:
+def _backward(fitter: Fitter, current: Candidate, material) -> tuple[Candidate, list[str]]:
     """Drop what does not pay for itself next to the others, or no longer explains a material share."""
     removed = []
     changed = True
@@ -477,7 +475,7 @@ def _backward(evaluator: Fitter, current: Candidate, material) -> tuple[Candidat
         changed = False
         for name in list(current.names):
             reduced_names = [n for n in current.names if n != name]
-            reduced = evaluator.candidate(reduced_names, previous=current.previous())
+            reduced = fitter.candidate(reduced_names, previous=current.previous())
             if reduced.score <= current.score or not material(current, reduced):
                 current = reduced
                 removed.append(name)
@@ -486,12 +484,12 @@ def _backward(evaluator: Fitter, current: Candidate, material) -> tuple[Candidat
     return current, removed
 
 
-def _sequential_explained(evaluator: Fitter, chosen: Candidate, nominal: Candidate) -> dict[str, float]:
+def _sequential_explained(fitter: Fitter, chosen: Candidate, nominal: Candidate) -> dict[str, float]:
     """Share of the nominal held-out residual energy each effect explains, in the order of addition."""
     out = {}
     previous = nominal
     for i, name in enumerate(chosen.names):
-        step = evaluator.candidate(chosen.names[: i + 1], previous=chosen.previous())
+        step = fitter.candidate(chosen.names[: i + 1], previous=chosen.previous())
         out[name] = (previous.mse - step.mse) / nominal.mse if nominal.mse > 0 else 0.0
         previous = step
     return out
@@ -501,11 +499,11 @@ def fit_only(data: FlightData, r_nom: list[np.ndarray], effect: Effect) -> Selec
     """The paper's identification (Sec. 3.4): fit one named effect, without asking whether it pays."""
     if not applicable(effect, data):
         raise ValueError(f"{effect.name} has nothing to act against in these logs' scenes")
-    evaluator = make_fitter(data, r_nom, {effect.name: effect})
-    nominal = evaluator.candidate([])
-    chosen = evaluator.candidate([effect.name])
+    fitter = make_fitter(data, r_nom, {effect.name: effect})
+    nominal = fitter.candidate([])
+    chosen = fitter.candidate([effect.name])
     step = Step([{"name": effect.name, "cv_mse_N2": chosen.mse, "gain": 1.0 - chosen.mse / nominal.mse,
                   "score": chosen.score, "params": chosen.fit.effects[0].params_dict()}], effect.name,
                 nominal.mse, chosen.mse)
     explained = {effect.name: (nominal.mse - chosen.mse) / nominal.mse if nominal.mse > 0 else 0.0}
-    return Selection(chosen, nominal, [step], [], explained, data.effective_samples(), fitter=evaluator)
+    return Selection(chosen, nominal, [step], [], explained, data.effective_samples(), fitter=fitter)
