@@ -38,7 +38,8 @@ one form per effect, tried in a round only where the plain form improves the mod
 and kept only when their extra parameters are determined. Quadratic
 drag on the air-relative velocity with a fitted steady wind (``quadratic_drag[wind]``)
 looks like a steady force plus drag, so it is tried after the selection in place of
-any chosen subset of :data:`WIND_REPLACES`, and kept where it scores better.
+any chosen subset of :data:`WIND_REPLACES`, and kept where it scores better; the
+backward pass then runs again, since the wind can leave a companion nothing to explain.
 
 Once the effects are chosen, each is given the form that scores best next to all the
 others (:func:`_refine_forms`): the round that chose an effect saw only the effects
@@ -269,7 +270,10 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
         current, dropped = _backward(fitter, refined, material)
         removed += dropped
     if "quadratic_drag" in base and variants is None:
-        current = _drag_in_wind(fitter, current, base["quadratic_drag"], progress)
+        in_wind = _drag_in_wind(fitter, current, base["quadratic_drag"], progress)
+        if in_wind is not current:  # the wind may leave a companion nothing to explain (a thrust scale of 0.9999)
+            current, dropped = _backward(fitter, in_wind, material)
+            removed += dropped
     explained = _sequential_explained(fitter, current, nominal)
     explained = {effect_name(k): v for k, v in explained.items()}
     chosen_names = {effect_name(k) for k in current.names}
