@@ -147,12 +147,14 @@ def closed_loop_check(model: str | Path | FlightModel, scenario: dict[str, Any],
     before = results["nominal_mpc"]["wall_normal_rmse"]
     after = results["scmpc_discovered"]["wall_normal_rmse"]
     reduction = (1.0 - after / before) if before and np.isfinite(before) and np.isfinite(after) else None
-    summary = (f"closed loop ({scenario['env_id']}, {len(list(seeds))} seed(s), {duration_s:.1f} s): wall-normal RMSE "
-               f"nominal MPC {100 * before:.2f} cm, SC-MPC from the discovered model {100 * after:.2f} cm")
+    world = ("the log's own simulated scenario (ground truth)" if ground_truth else
+             "a given scenario whose scene, vehicle, rate and path match the log's (not the log's own record, "
+             "so not ground truth)")
+    summary = (f"closed loop ({scenario['env_id']}, {len(list(seeds))} seed(s), {duration_s:.1f} s, in {world}): "
+               f"wall-normal RMSE nominal MPC {100 * before:.2f} cm, SC-MPC from the discovered model "
+               f"{100 * after:.2f} cm")
     return {
-        "world": "the log's own simulated scenario (ground truth)" if ground_truth else
-                 "a given scenario whose scene, vehicle, rate and path match the log's (not the log's own record, "
-                 "so not ground truth)",
+        "world": world,
         "env_id": scenario["env_id"],
         "seeds": [int(s) for s in seeds],
         "duration_s": duration_s,
