@@ -278,8 +278,8 @@ def format_summary(report: dict[str, Any]) -> str:
         shape = report["unexplained"].get("shape")
         if shape:
             points = ", ".join(f"{f:.3g} N at {k:.3g}" for k, f in zip(shape["knots"], shape["force_N_at_knots"]))
-            lines.append(f"  its shape along {shape['direction_world']} (piecewise linear in {shape['regressor']}, "
-                         f"{shape['unit']}): {points}")
+            lines.append(f"  its shape along {shape['direction_world']} over every flown {shape['regressor']} "
+                         f"(piecewise linear, {shape['unit']}): {points}")
     cl = report.get("closed_loop")
     if cl:
         lines.append(cl.get("summary", ""))
@@ -327,7 +327,7 @@ def _unexplained_lines(left: dict) -> list[str]:
     elif lives == "nowhere in particular":
         head += " is spread over the flight: no state, place or time period predicts it"
     else:
-        head += (f" depends on {w.get('regressor')} in {w.get('range')} {w.get('unit') or ''}"
+        head += (f" depends on {w.get('regressor')}: it stands out in {w.get('range')} {w.get('unit') or ''}"
                  + (" (beyond the surface: likely a sidecar error, see the warning)"
                     if w.get("unit") == "m" and w.get("range") and w["range"][1] <= 0 else ""))
     return [head]

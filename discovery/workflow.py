@@ -531,8 +531,8 @@ class Discovery:
             if contact.any():
                 self.notes_.append(
                     f"{log.source}: {contact.sum() * dt:.1f} s of rotors spinning up or down on the ground (next to a "
-                    f"rest, within {100 * CONTACT_HEIGHT:.0f} cm of the height the vehicle rested at, the thrust below "
-                    "the weight): left out, the ground still carries part of the weight")
+                    f"rest, no more than {100 * CONTACT_HEIGHT:.0f} cm above the ground the vehicle rested on or took "
+                    "off from, the thrust below the weight): left out, the ground still carries part of the weight")
             for mask, why in ((resting, "held up"), (contact, "ground contact")):
                 if mask.any():
                     self.left_out_.append({"log": log.source, "reason": why, "seconds": round(float(mask.sum() * dt), 3),

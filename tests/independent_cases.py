@@ -95,7 +95,7 @@ def cases(seed: int) -> list[Case]:
         Case("quadratic_drag_wind", {"quadratic_drag": (C, w_air)}, FAST, {"quadratic_drag": {"C": C, "w": w_air}},
              {"wall": False}),
         Case("motor_lag", {"linear_drag": D}, OPEN, {"linear_drag": {"D": D}}, {"wall": False}, motor_lag=0.03),
-        # ---- the classes of issue 27
+        # ---- beyond the library, and a sidecar that is wrong
         Case("reversed_normal", {"suction": (k_s, d_thr)}, WALL, {"wall_suction": {"k_s": k_s, "d_thr": d_thr}},
              {"wall_normal": -1.0}, says=("flip the sign of scene.walls[0].normal",)),
         Case("gust", {"gust": ([u(0.4, 0.6), -u(0.3, 0.5), u(0.2, 0.4)], gust_f)}, OPEN, {}, {"wall": False},
