@@ -14,14 +14,18 @@ closed-loop check of SC-MPC built from the discovered model)::
     found = Discovery().fit([read_log("flight.csv")])
     found.effects_, found.gap_before_, found.gap_after_
     found.model_.save("model.json")
+    found.predict(read_log("other.csv")), found.score(read_log("other.csv"))
 
 Command line: ``wall-inspector fly`` records logs from the simulator and
 ``wall-inspector discover`` runs the workflow. The log format is documented in
 :mod:`discovery.flight_log`; the modules, in the order of the workflow:
-:mod:`~discovery.flight_log`, :mod:`~discovery.differentiation`,
+:mod:`~discovery.flight_log`, :mod:`~discovery.coverage`, :mod:`~discovery.differentiation`,
 :mod:`~discovery.aero_eval`, :mod:`~discovery.residuals`, :mod:`~discovery.prediction`,
-:mod:`~discovery.regressors`, :mod:`~discovery.fitting`, :mod:`~discovery.selection`
-(with :mod:`~discovery.motor_lag`, a lag of the rotors behind the logged thrust),
+:mod:`~discovery.regressors`, :mod:`~discovery.layout`, :mod:`~discovery.fitting`,
+:mod:`~discovery.selection` (with :mod:`~discovery.motor_lag`, a lag of the rotors behind the
+logged thrust, and :mod:`~discovery.thrust_map`, an affine thrust map), :mod:`~discovery.determination`,
+:mod:`~discovery.cancelling`, :mod:`~discovery.wall_extent`, :mod:`~discovery.noise`,
+:mod:`~discovery.unexplained`, :mod:`~discovery.standins`,
 :mod:`~discovery.workflow`, :mod:`~discovery.report`, :mod:`~discovery.plots`,
 :mod:`~discovery.closed_loop`, :mod:`~discovery.fly`, :mod:`~discovery.scenarios`,
 :mod:`~discovery.cli`; beside them :mod:`~discovery.importers` (PX4 ULog and ROS 2 bags,

@@ -6,7 +6,11 @@ process (what a user waits for: interpreter start, imports, compile-cache lookup
 fitting, report and plots) and inside this process (the same command without the
 interpreter's start and imports). The target is at most 5 s per minute of 100 Hz log as
 a command; both figures are checked against it and printed with the load average, since
-on a shared machine the figures follow the load.
+on a shared machine the figures follow the load. Then (``--flights``, default 5) it flies
+that many one-minute surveys of one vehicle, each in its own steady wind with the same
+quadratic drag, and times ``discover`` on all of them at once as a command (one model, a
+wind per flight): target at most 20 s for five, with the shared drag coefficient, each
+flight's wind and each held-out flight's force error printed beside it.
 
 ``--acceptance``: flies hidden-effect logs (:mod:`discovery.hidden_effects`): every
 form of :data:`~discovery.hidden_effects.FORMS` (the library's effects and the
@@ -34,6 +38,10 @@ from pathlib import Path
 
 TARGET_S_PER_MINUTE = 5.0
 EFFECTS = "wall_suction:k_s=4.1,d_thr=0.132;linear_drag:D=0.2/0.2/0.2"
+#: several flights of one vehicle, each in its own steady wind (m/s, world x and y): one model with per-flight winds
+FLIGHT_WINDS = ((1.5, 0.5), (-2.0, 1.0), (2.5, -1.5), (0.5, 3.0), (-3.0, -2.0))
+FLIGHTS_DRAG = (0.1, 0.1, 0.08)  # N s^2/m^2, the quadratic drag flown in every wind
+TARGET_S_FLIGHTS = 20.0  # s for five flights of a minute at 100 Hz, as a command
 
 
 RATES = (100.0, 50.0, 200.0, 500.0, 1000.0)
@@ -48,6 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--acceptance", action="store_true", help="measure naming, parameter and gap figures on "
                         "hidden-effect logs instead of the runtime")
     parser.add_argument("--seeds", default="0", help="comma-separated seeds for --acceptance (default 0)")
+    parser.add_argument("--flights", type=int, default=5, help="also time discover on this many one-minute flights "
+                        f"in different winds, fitted together (default 5, at most {len(FLIGHT_WINDS)}; 0 skips it)")
 
 
 def _check_args(args: argparse.Namespace) -> str | None:
@@ -55,6 +65,8 @@ def _check_args(args: argparse.Namespace) -> str | None:
         return f"--duration must be in (0, 3600] s, got {args.duration}"
     if args.repeats < 1:
         return f"--repeats must be at least 1, got {args.repeats}"
+    if not 0 <= args.flights <= len(FLIGHT_WINDS):
+        return f"--flights must be in [0, {len(FLIGHT_WINDS)}], got {args.flights}"
     try:
         seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     except ValueError:
@@ -207,6 +219,8 @@ def _timing(args: argparse.Namespace) -> int:
             inprocess_times.append(time.perf_counter() - start)
         found = sorted(e["name"] for e in json.loads((Path(tmp) / "run0" / "report.json").read_text())["effects"])
 
+        flights = _time_flights(args, Path(tmp)) if args.flights else None
+
     worst, worst_inprocess = max(process_times), max(inprocess_times)
     target = TARGET_S_PER_MINUTE * args.duration / 60.0
     load_end = os.getloadavg()
@@ -217,13 +231,55 @@ def _timing(args: argparse.Namespace) -> int:
     for label, slowest in (("as a command", worst), ("in one process", worst_inprocess)):
         print(f"per minute of log {label}: {60.0 * slowest / args.duration:.2f} s (slowest run); target <= "
               f"{TARGET_S_PER_MINUTE:g} s: {'met' if slowest <= target else 'NOT met'}")
+    if flights is not None:
+        limit = TARGET_S_FLIGHTS * args.flights / 5.0
+        print(f"{args.flights} flights of {args.duration:g} s at 100 Hz in {args.flights} winds, fitted together as a "
+              f"command: {', '.join(f'{t:.2f}' for t in flights['command_s'])} s; slowest {max(flights['command_s']):.2f} s;"
+              f" target <= {limit:g} s: {'met' if max(flights['command_s']) <= limit else 'NOT met'}")
+        print(f"  found {', '.join(flights['found']) or 'nothing'}; shared C {flights['C']} (flown {list(FLIGHTS_DRAG)});"
+              f" winds {flights['winds']} (flown {[list(w) for w in FLIGHT_WINDS[:args.flights]]}); held-out flight "
+              f"force error / in-sample: {flights['held_out_ratio']}")
     if args.json:
         Path(args.json).write_text(json.dumps({
             "log_duration_s": args.duration, "rate_hz": 100.0, "effects_found": found,
             "command_s": process_times, "in_process_s": inprocess_times,
             "target_s_per_minute": TARGET_S_PER_MINUTE, "target_met": worst <= target,
             "in_process_target_met": worst_inprocess <= target,
+            "flights": flights, "flights_target_s": TARGET_S_FLIGHTS * args.flights / 5.0 if flights else None,
+            "flights_target_met": (max(flights["command_s"]) <= TARGET_S_FLIGHTS * args.flights / 5.0)
+            if flights else None,
             "load_average_start": list(load_start), "load_average_end": list(load_end), "cpus": os.cpu_count(),
         }, indent=2))
         print(f"wrote {args.json}")
     return 0
+
+
+def _time_flights(args: argparse.Namespace, folder: Path) -> dict:
+    """Fly ``args.flights`` one-minute surveys, each in its own steady wind with the same quadratic drag, and time
+    ``wall-inspector discover`` on all of them at once as a fresh process (``args.repeats`` times)."""
+    from discovery.fly import fly
+
+    paths = []
+    for i, (wx, wy) in enumerate(FLIGHT_WINDS[:args.flights]):
+        path = folder / f"wind{i}.csv"
+        coefficients = "/".join(f"{c:g}" for c in FLIGHTS_DRAG)
+        fly(None, "pid", f"quadratic_drag:C={coefficients},w={wx:g}/{wy:g}/0", 60 + i, path, scenario="survey",
+            duration=args.duration)
+        paths.append(str(path))
+    times = []
+    for i in range(args.repeats):
+        out = folder / f"flights{i}"
+        command = [sys.executable, "-m", "wall_inspector.cli", "discover", *paths, "--out", str(out), "--quiet",
+                   "--no-plots"]
+        start = time.perf_counter()
+        subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+        times.append(time.perf_counter() - start)
+    report = json.loads((folder / "flights0" / "report.json").read_text())
+    drag = next((e for e in report["effects"] if e["name"] == "quadratic_drag"), None)
+    flights = report.get("flights") or {}
+    return {"n": args.flights, "command_s": times, "found": sorted(e["name"] for e in report["effects"]),
+            "C": None if drag is None else [round(c, 4) for c in drag["params"]["C"]],
+            "winds": [[round(x, 3) for x in (c.get("quadratic_drag") or {}).get("w", [])]
+                      for c in flights.get("conditions", [])],
+            "held_out_ratio": [None if h.get("ratio_to_in_sample") is None else round(h["ratio_to_in_sample"], 3)
+                               for h in flights.get("held_out", [])]}

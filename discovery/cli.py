@@ -6,6 +6,10 @@
                             [--effect wall_suction] [--closed-loop]
     wall-inspector discover flight.ulg --vehicle vehicle.yaml --scene scene.yaml --out results/
 
+Several logs of one vehicle are fitted together: one model for the vehicle and its
+aerodynamics, each flight with its own conditions (a steady wind) and scene; each flight is
+then held out in turn and predicted by the model fitted on the others.
+
 Writes into ``--out``: ``model.json`` (the nominal vehicle plus the named effects with
 fitted parameters and standard errors; ``gym.make(..., model="model.json")`` and
 ``SCMPC.from_env(env, model="model.json")`` load it), ``report.json`` (see
@@ -38,7 +42,7 @@ from wall_env.effects import EFFECTS
 __all__ = ["add_arguments", "run", "OUTPUT_FILES"]
 
 OUTPUT_FILES = ("model.json", "report.json", "residual_vs_regressor.png", "residual_time.png", "prediction.png",
-                "unexplained_shape.png")
+                "unexplained_shape.png", "unexplained_where.png")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -153,16 +157,23 @@ def run(args: argparse.Namespace) -> int:
     found.model_.save(model_path)
     closed_loop = None
     if args.closed_loop:
-        from discovery.closed_loop import closed_loop_check, load_scenario
+        from discovery.closed_loop import closed_loop_check, load_scenario, scenario_match
 
         scenario_file = Path(args.scenario) if args.scenario else scenario_path(args.logs[0])
         if not scenario_file.exists():
             return _fail(f"--closed-loop needs the log's world: {scenario_file} does not exist "
                          "(fly writes it beside the log; or pass --scenario)")
+        try:
+            scenario = load_scenario(scenario_file)
+            problems, own = scenario_match(scenario, logs[0], args.logs[0])
+        except ValueError as exc:
+            return _fail(f"--scenario {scenario_file}: {exc}")
+        if problems:
+            return _fail(f"--scenario {scenario_file} is not the world of {args.logs[0]}: {'; '.join(problems)}")
         if say:
             say(f"closed-loop check in {scenario_file}")
-        closed_loop = closed_loop_check(model_path, load_scenario(scenario_file),
-                                        seeds=range(args.closed_loop_seeds), duration=args.closed_loop_duration)
+        closed_loop = closed_loop_check(model_path, scenario, seeds=range(args.closed_loop_seeds),
+                                        duration=args.closed_loop_duration, ground_truth=own)
     if not args.no_plots and found.usable_:
         from discovery.plots import plot_all
 

@@ -7,6 +7,10 @@ Two checks that make a report say *why* it could or could not say more:
   a free vehicle would fall at more than g/2). Something else holds it up (the
   ground, a hand, a stand); that force is not aerodynamic, so these samples are left
   out of the fits and the report says how long they lasted.
+- :func:`ground_contact`: the rotors spinning up on the ground before a take-off and
+  the touchdown before they stop, next to a rest: near the height the vehicle rested
+  at, with the thrust below the weight. The ground still carries part of the weight
+  (the thrust ramps from half the weight to all of it), so these are left out too.
 - :func:`scene_problems`: a rotor behind a wall, below the ground or above the
   ceiling means the scene (sidecar or scene file) is wrong, not the physics: the
   note says which surface and the fix (flip a wall normal, move a point, lower
@@ -24,7 +28,8 @@ import numpy as np
 from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 
-__all__ = ["REST_THRUST_SHARE", "resting_on_ground", "flight_limits", "scene_problems"]
+__all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "resting_on_ground", "ground_contact", "flight_limits",
+           "scene_problems"]
 
 REST_THRUST_SHARE = 0.5  # of the weight
 NOT_FALLING = 0.25  # of g: a vertical acceleration above -NOT_FALLING g with thrust below half the weight is held
@@ -44,6 +49,49 @@ def resting_on_ground(log: FlightLog) -> np.ndarray:
     # with the thrust carrying a share s < 1/2 of the weight a free vehicle falls at (1 - s) g > g / 2
     not_falling = a_z > -NOT_FALLING * log.gravity
     return (vertical < REST_THRUST_SHARE * weight) & not_falling
+
+
+CONTACT_HEIGHT = 0.03  # m: within this of the height the vehicle rested at, it is still on the ground
+CONTACT_CENTRE_S = 0.5  # s of a rest stretch next to its end whose median height is the ground's
+
+
+def ground_contact(log: FlightLog) -> tuple[np.ndarray, np.ndarray]:
+    """Samples on the ground with the rotors turning: spin-up before a take-off and touchdown before the rotors stop.
+
+    They extend each stretch the vehicle rested (:func:`resting_on_ground`) for as long as the vertical thrust
+    stays below the weight and the height no more than :data:`CONTACT_HEIGHT` above the ground: the height it
+    rested at (the median over the :data:`CONTACT_CENTRE_S` next to the stretch's end), or before a touchdown the
+    higher of that and the heights it took off from. The ground still carries part of the weight there, a force
+    that is not aerodynamic. The velocity is not asked: a state estimate drifts on touchdown (a PX4 SITL log
+    reads 0.46 m/s down, and heights down to 0.45 m below the take-off's, while on the ground). Returns
+    ``(resting, contact)``: the held-up samples and the spin-up and touchdown samples next to them."""
+    resting = resting_on_ground(log)
+    contact = np.zeros_like(resting)
+    if not resting.any() or resting.all():
+        return resting, contact
+    thrust = log.rotor_thrusts.sum(axis=1) if log.rotor_thrusts is not None else log.thrust_cmd
+    vertical = thrust * log.R_body_to_world[:, 2, 2]
+    weight = log.vehicle.mass * log.gravity
+    height = log.p_world[:, 2]
+    dt = float(np.median(np.diff(log.t)))
+    centre = max(1, int(round(CONTACT_CENTRE_S / dt)))
+    edges = np.flatnonzero(np.diff(resting.astype(int)))  # index before each change
+    take_off: list[float] = []  # heights the vehicle rested at before each take-off
+    for edge in edges:
+        if resting[edge]:  # a rest stretch ends at edge: spin-up after it
+            ground = float(np.median(height[max(0, edge - centre + 1):edge + 1]))
+            take_off.append(ground)
+            step, i = 1, edge + 1
+        else:  # a rest stretch starts at edge + 1: touchdown before it; the estimate may have drifted below
+            # the height the vehicle took off from (a PX4 SITL log reads 0.45 m below it), and the vehicle is down
+            # once it is back at that height
+            ground = max([float(np.median(height[edge + 1:edge + 1 + centre]))] + take_off)
+            step, i = -1, edge
+        while 0 <= i < len(height) and not resting[i] and vertical[i] < weight \
+                and height[i] <= ground + CONTACT_HEIGHT:
+            contact[i] = True
+            i += step
+    return resting, contact
 
 
 def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
@@ -100,9 +148,14 @@ def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
 PENETRATION = 0.02  # m beyond a surface before a sample counts as through it
 
 
-def scene_problems(regressors: list, times: np.ndarray) -> list[str]:
-    """Likely sidecar errors: rotors through a wall, the ground or the ceiling, with the fix to make."""
-    out = []
+def scene_problems(regressors: list, times: np.ndarray) -> list[dict]:
+    """Likely sidecar errors: rotors through a wall, the ground or the ceiling, with the fix to make.
+
+    Each is ``{"message", "surface", "effects", "wall", "reversed"}``: the warning, the surface (``wall``,
+    ``ground``, ``ceiling``), the effects that act against it, the wall's index (walls only) and whether
+    the flight is behind the wall most of the time (its normal points into the wall: the fix is certain).
+    """
+    out: list[dict] = []
     dt = float(np.median(np.diff(times))) if len(times) > 1 else 0.0
     for reg in regressors:
         v = reg.values
@@ -119,13 +172,16 @@ def scene_problems(regressors: list, times: np.ndarray) -> list[str]:
                    "from the wall, into free space)" if most > 0.5 else
                    f"move scene.walls[{k}].point at least {-deepest:.2f} m back along the normal, or check the "
                    "log's frame")
-            out.append(f"likely sidecar error: the rotors are behind wall {k} (down to {deepest:.2f} m) for "
-                       f"{seconds:.1f} s, which a vehicle cannot be; {fix}")
+            out.append({"message": f"likely sidecar error: the rotors are behind wall {k} (down to {deepest:.2f} m) "
+                                   f"for {seconds:.1f} s, which a vehicle cannot be; {fix}",
+                        "surface": "wall", "wall": int(k), "reversed": most > 0.5, "effects": ["wall_suction"]})
         elif reg.name == "height above ground":
-            out.append(f"likely sidecar error: the rotors are below the ground (down to {deepest:.2f} m under "
-                       f"ground_z) for {seconds:.1f} s; lower scene.ground_z by at least {-deepest:.2f} m, or the "
-                       "position estimate drifted (check the log's altitude source)")
+            out.append({"message": f"likely sidecar error: the rotors are below the ground (down to {deepest:.2f} m "
+                                   f"under ground_z) for {seconds:.1f} s; lower scene.ground_z by at least "
+                                   f"{-deepest:.2f} m, or the position estimate drifted (check the log's altitude "
+                                   "source)", "surface": "ground", "reversed": False, "effects": ["ground_effect"]})
         elif reg.name == "distance to ceiling":
-            out.append(f"likely sidecar error: the rotors are above the ceiling (by up to {-deepest:.2f} m) for "
-                       f"{seconds:.1f} s; raise scene.ceiling_z by at least {-deepest:.2f} m")
+            out.append({"message": f"likely sidecar error: the rotors are above the ceiling (by up to {-deepest:.2f} m)"
+                                   f" for {seconds:.1f} s; raise scene.ceiling_z by at least {-deepest:.2f} m",
+                        "surface": "ceiling", "reversed": False, "effects": ["ceiling_effect"]})
     return out

@@ -12,21 +12,32 @@ from the bounds of its range. Nothing undetermined goes into the model file:
   undetermined is left out altogether.
 
 Each such case is reported with the manoeuvre that would determine it
-(:data:`MANOEUVRES`).
+(:data:`MANOEUVRES`). :func:`refit_determined` fits what is left again, so the model file holds
+the values of the model that was scored, not those of a joint fit with what was dropped.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from wall_env.effects import Effect
 
-__all__ = ["Z_95", "NULL_VALUES", "MANOEUVRES", "Undetermined", "undetermined_cases", "restrict", "determined",
+if TYPE_CHECKING:
+    from discovery.fitting import Candidate, Fitter
+
+__all__ = ["Z_95", "NULL_VALUES", "NULL_BY_EFFECT", "null_value", "MANOEUVRES", "Undetermined", "undetermined_cases",
+           "restrict", "determined", "entry", "nothing_left", "open_cases", "refit_determined",
            "determining_manoeuvre", "separating_manoeuvre"]
 
 Z_95 = 1.96
 NULL_VALUES = {"k_s": 0.0, "d_thr": 0.0, "D": 0.0, "C": 0.0, "F": 0.0, "w": 0.0, "scale": 1.0, "radius": 0.0,
                "time_constant": 0.0}
+#: null values of parameters whose name means something else in another effect (an affine thrust map's offset, N,
+#: has none at 0; a ground or ceiling effect's distance offset has no null value)
+NULL_BY_EFFECT = {("thrust_scale", "offset"): 0.0}
 _AXES = "xyz"
 MANOEUVRES = {
     ("wall_suction", "k_s"): "fly with the rotors within 0.15 m of the wall, at several distances",
@@ -40,6 +51,8 @@ MANOEUVRES = {
     ("ceiling_effect", "offset"): "fly slowly from 0.3 m in to within 0.03 m of the ceiling and back, several "
                                   "times (the offset shows where the distance is comparable to it)",
     ("thrust_scale", "scale"): "climb and descend briskly (thrust varying by 20 % or more)",
+    ("thrust_scale", "offset"): "climb and descend briskly over a wide range of thrust (from 70 % to 130 % of the "
+                                "weight): the offset is the thrust at zero command, the scale its slope",
     ("constant_force", "F"): "a longer flight (the force is within its noise)",
     ("motor_lag", "time_constant"): "climb and descend in steps of different lengths (0.3 s to 3 s), so that the "
                                     "thrust changes at several rates",
@@ -48,6 +61,11 @@ MANOEUVRES = {
 
 class Undetermined(dict):
     """``{"effect", "parameter", "name", "index", "value", "std", "reason", "action", "manoeuvre"}``."""
+
+
+def null_value(effect: str, name: str) -> float | None:
+    """The value at which parameter ``name`` of ``effect`` has no effect (None if it has none)."""
+    return NULL_BY_EFFECT.get((effect, name), NULL_VALUES.get(name))
 
 
 def determining_manoeuvre(effect: str, name: str, index: int | None = None) -> str:
@@ -81,7 +99,7 @@ def undetermined_cases(effects: list[Effect], stds: list[dict]) -> list[Undeterm
             error = np.atleast_1d(np.asarray(std.get(p.name, np.nan), dtype=float))
             if error.size != value.size:
                 error = np.full(value.size, np.nan)
-            null = NULL_VALUES.get(p.name)
+            null = null_value(effect.name, p.name)
             for i in range(value.size):
                 reason = _reason(float(value[i]), float(error[i]), p.low, p.high, null)
                 if reason is None:
@@ -105,14 +123,15 @@ def restrict(effects: list[Effect], cases: list[Undetermined]) -> list[Effect]:
             continue
         values = effect.params_dict()
         for c in mine:
-            null = NULL_VALUES.get(c["name"], 0.0)
+            null = null_value(effect.name, c["name"])
+            null = 0.0 if null is None else null
             if c["index"] is None:
                 values[c["name"]] = null
             else:
                 entries = list(np.atleast_1d(np.asarray(values[c["name"]], dtype=float)))
                 entries[c["index"]] = null
                 values[c["name"]] = entries
-        if mine and len(mine) >= sum(p.size for p in effect.parameters if p.name in NULL_VALUES):
+        if mine and len(mine) >= sum(p.size for p in effect.parameters if null_value(effect.name, p.name) is not None):
             continue  # every entry nulled: nothing left of this effect
         out.append(type(effect)(**values, **effect.option_values))
     return out
@@ -153,3 +172,72 @@ SEPARATING = {
 def separating_manoeuvre(a: str, b: str) -> str:
     """The flight that tells effect ``a`` from effect ``b``."""
     return SEPARATING.get(frozenset({a, b}), f"fly where {a} acts and {b} does not (and the other way round)")
+
+
+def entry(effect: Effect, name: str, index: int | None) -> int:
+    """Position of parameter ``name`` (entry ``index`` of a vector) in ``effect``'s own parameter vector."""
+    position = 0
+    for p in effect.parameters:
+        if p.name == name:
+            return position + (index or 0)
+        position += p.size
+    raise KeyError(f"{effect.name} has no parameter {name}")
+
+
+def nothing_left(effect: Effect, held: dict[int, float]) -> bool:
+    """Whether every entry of ``effect``'s first parameter is held at its null value: then the effect puts no force
+    on the vehicle whatever its other parameters (a drag with every coefficient at zero has no use for a wind)."""
+    first = effect.parameters[0]
+    null = null_value(effect.name, first.name)
+    return null is not None and all(held.get(i) == null for i in range(first.size))
+
+
+def open_cases(candidate: Candidate, hold: dict[str, dict[int, float]]) -> list[Undetermined]:
+    """The undetermined entries of a fitted candidate set not already held (:func:`undetermined_cases`); with several
+    flights, a flight's own entry (its wind) counts when it is undetermined in every flight."""
+    fit = candidate.fit
+    if not candidate.names:
+        return []
+    held = {(e.name, i) for k, e in zip(candidate.names, fit.effects) for i in hold.get(k, {})}
+    out = []
+    for case in undetermined_cases(fit.effects, fit.std_dicts()):
+        effect = next(e for e in fit.effects if e.name == case["effect"])
+        if (effect.name, entry(effect, case["name"], case["index"])) in held:
+            continue
+        layout = fit.layout
+        if layout is not None and layout.n_flights > 1 and case["name"] == "w":
+            others = [undetermined_cases(fit.flight_effects(f), fit.std_dicts(f)) for f in range(1, layout.n_flights)]
+            if not all(any(c["effect"] == case["effect"] and c["parameter"] == case["parameter"] for c in other)
+                       for other in others):
+                continue  # determined in another flight
+        out.append(case)
+    return out
+
+
+def refit_determined(fitter: Fitter | None, chosen: Candidate, say: Callable[[str], None] | None = None
+                     ) -> tuple[Candidate, dict[str, dict[int, float]], list[Undetermined]]:
+    """Only what the flight determined, fitted again: undetermined entries held at their null value and effects
+    whose main parameter is undetermined dropped, the rest refitted and scored again by ``fitter``
+    (:class:`~discovery.fitting.Fitter`), until nothing more is undetermined. Returns the final candidate set,
+    the entries held (``{key: {entry: value}}``) and every case found on the way."""
+    current, found = chosen, []
+    hold: dict[str, dict[int, float]] = {}
+    for _ in range(len(chosen.names) + 2):
+        cases = open_cases(current, hold)
+        if not cases or fitter is None:
+            break
+        found += cases
+        dropped = {c["effect"] for c in cases if c["action"].startswith("effect left out")}
+        keys = [k for k, e in zip(current.names, current.fit.effects) if e.name not in dropped]
+        for c in cases:
+            if c["effect"] in dropped:
+                continue
+            key, effect = next((k, e) for k, e in zip(current.names, current.fit.effects) if e.name == c["effect"])
+            null = null_value(effect.name, c["name"])
+            hold.setdefault(key, {})[entry(effect, c["name"], c["index"])] = 0.0 if null is None else null
+        hold = {k: v for k, v in hold.items() if k in keys}
+        keys = [k for k in keys if not nothing_left(fitter.templates[k], hold.get(k, {}))]
+        if say is not None:
+            say(f"fitting again without what the flight did not determine: {', '.join(keys) or 'nothing'}")
+        current = fitter.candidate(keys, previous=current.previous(), hold=hold)
+    return current, hold, found

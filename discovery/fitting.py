@@ -4,7 +4,10 @@ Given the nominal residual ``r_nom`` (:mod:`discovery.residuals`) and a set of e
 :class:`EffectFit` finds the parameters that minimise ``sum_k |r_nom,k - sum_i K[F_i(theta_i)]_k|^2``
 with :func:`scipy.optimize.least_squares` (trust-region reflective, within each
 parameter's range), the Jacobian being CasADi's derivative of the same effect
-definition the simulator uses (:class:`~discovery.aero_eval.ForceEvaluator`).
+definition the simulator uses (:class:`~discovery.aero_eval.ForceEvaluator`). The packed
+vector ``theta`` is laid out by a :class:`~discovery.layout.ParameterLayout`: across
+several flights each flight has its own wind while the rest is shared, and entries can be
+held at a value (an undetermined entry nulled, a nuisance parameter a fold holds).
 
 Relation to the paper (Sec. 3.4): for ``wall_suction`` the Jacobian is CasADi's exact
 derivative of the per-rotor model (Eq. 10). It equals Eq. 29 for ``k_s``; for ``d_thr``
@@ -23,27 +26,33 @@ Speed without shortcuts in the model:
 
 Fits and cross-validation use every ``window / 10``-th residual row
 (:attr:`~discovery.residuals.Segment.fit_rows`; rows a tenth of the smoothing window
-apart carry nearly the same information); :func:`out_of_fold_residuals` gives the
+apart carry nearly the same information); :meth:`EffectFit.out_of_fold` gives the
 held-out residual of a result at every sample for the reported figures.
 Standard errors are Newey-West's sandwich at the solution (:meth:`EffectFit._standard_errors`):
 each axis keeps its own noise level, and residual rows are correlated over the smoothing
 window.
+
+:class:`Fitter` owns every fit of one run: the effects' terms (evaluated once per
+parameter value and shared by every set they appear in) and each candidate set's fit,
+held-out residual and score, so that no effect set is fitted twice.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from scipy.optimize import least_squares
 
-from discovery.motor_lag import LagTerm, MotorLag
-from discovery.residuals import FlightData, Segment
+from discovery.layout import ParameterLayout
+from discovery.residuals import FlightData
 from wall_env.aero import AeroModel
 from wall_env.effects import Effect, make_effect
 
-__all__ = ["CV_TOL", "STARTS", "EffectFit", "FitResult", "applicable", "term_key", "hac_lags", "out_of_fold_residuals"]
+__all__ = ["CV_TOL", "STARTS", "Term", "EffectTerm", "EffectFit", "FitResult", "Candidate", "Fitter", "applicable",
+           "term_key", "hac_lags"]
 
 # Starting points for effects whose force is not affine in their parameters (plausible
 # physical values; the fit is bounded by each parameter's range from the library).
@@ -70,48 +79,32 @@ def applicable(effect: Effect, data: FlightData) -> bool:
     return any(effect.applies_to(seg.scene.structure) for seg in data.segments)
 
 
-#: smoothing windows of lags over which the standard errors sum the scores' correlation (:func:`hac_lags`)
-HAC_WINDOWS = 2.0
+def hac_lags(segment) -> int:
+    """Lags (in fit rows) of the Newey-West sum: :meth:`~discovery.residuals.Segment.hac_lags`."""
+    return segment.hac_lags()
 
 
-def hac_lags(segment: Segment) -> int:
-    """Lags (in fit rows) of the Newey-West sum: :data:`HAC_WINDOWS` smoothing windows.
+class Term(Protocol):
+    """One effect's contribution ``K[F(theta)]`` per segment (what :class:`EffectFit` sums)."""
 
-    Rows less than a window apart share smoothed samples, so their residuals are correlated up to
-    one window; the sum runs to two for margin (over ten noisy ground-offset logs the rms of
-    error / standard error was 0.91 with one window and 0.78 with three).
-    """
-    rows_per_window = segment.kernel.window / max(1, segment.kernel.window // 10)
-    return max(1, int(round(HAC_WINDOWS * rows_per_window)))
+    size: int
+    low: np.ndarray
+    high: np.ndarray
+    affine: bool
 
+    def at_rows(self, segment: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, size)`` at the segment's fit rows."""
 
-@dataclass
-class FitResult:
-    """Fitted effects and what the fit says about them."""
+    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+        """``K[F]`` ``(n, 3)`` at every sample; ``theta`` ``(size,)`` or one row per sample."""
 
-    effects: list[Effect]  # with fitted parameters
-    theta: np.ndarray  # all parameters, packed in effect order
-    param_std: np.ndarray  # standard errors, same packing
-    cost: float  # 0.5 * sum of squared residuals on the fitted samples
-    n_rows: int  # residual rows (3 per sample)
-    success: bool
-    message: str = ""
-    fold_theta: list[np.ndarray] = field(default_factory=list)  # per cross-validation fold
-
-    def param_dicts(self) -> list[dict[str, Any]]:
-        return [e.params_dict() for e in self.effects]
-
-    def std_dicts(self) -> list[dict[str, Any]]:
-        out, index = [], 0
-        for e in self.effects:
-            size = e.param_size
-            out.append(e.params_dict(self.param_std[index:index + size]))
-            index += size
-        return out
+    def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
+        """Entries a cross-validation fold must hold at their defaults (nuisance parameters that reach
+        its held-out rows ``held``)."""
 
 
-class _Term:
-    """One effect's contribution ``K[F(theta)]`` at every segment's fit rows, with caching."""
+class EffectTerm:
+    """A library effect's ``K[F(theta)]`` at every segment's fit rows, through its CasADi function, with caching."""
 
     def __init__(self, data: FlightData, effect: Effect):
         self.data = data
@@ -121,53 +114,100 @@ class _Term:
         self.low, self.high = effect.param_bounds()
         self._evaluators = [seg.evaluator(self.model, data.rotor_positions_body) for seg in data.segments]
         self._active = [effect.applies_to(seg.scene.structure) for seg in data.segments]
-        self._rows = [seg.fit_rows for seg in data.segments]
-        self._cache_theta: np.ndarray | None = None
-        self._cache: tuple[list[np.ndarray], list[np.ndarray]] | None = None
+        self._cache: dict[int, tuple[bytes, tuple[np.ndarray, np.ndarray]]] = {}
         self.affine = False
         self._affine_base: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self._check_affine()
 
-    def _evaluate(self, theta: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        forces, jacobians = [], []
-        for seg, ev, active, rows in zip(self.data.segments, self._evaluators, self._active, self._rows):
-            if not active:
-                forces.append(np.zeros((len(rows), 3)))
-                jacobians.append(np.zeros((len(rows), 3, self.size)))
-                continue
-            f, j = ev.force_and_jacobian(seg.states, theta)
-            forces.append(seg.smooth_force(f, rows))
-            jacobians.append(seg.smooth_force(j, rows))
-        return forces, jacobians
+    def _evaluate(self, s: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        seg = self.data.segments[s]
+        rows = seg.fit_rows
+        if not self._active[s]:
+            return np.zeros((len(rows), 3)), np.zeros((len(rows), 3, self.size))
+        f, j = self._evaluators[s].force_and_jacobian(seg.states, theta)
+        return seg.smooth_force(f, rows), seg.smooth_force(j, rows)
 
     def _check_affine(self) -> None:
         """An effect is affine if its Jacobian is the same at two distant parameter values."""
         a = np.clip(self.effect.param_vector(), self.low, self.high)
         span = np.where(np.isfinite(self.high - self.low), self.high - self.low, 1.0)
         b = np.clip(a + 0.137 * span + 0.01, self.low, self.high)
-        fa, ja = self._evaluate(a)
-        fb, jb = self._evaluate(b)
-        scale = max(max((np.abs(j).max() if j.size else 0.0) for j in ja), 1e-12)
-        same = all(np.allclose(x, y, rtol=1e-9, atol=1e-9 * scale) for x, y in zip(ja, jb))
-        if same:
+        at_a = [self._evaluate(s, a) for s in range(len(self.data.segments))]
+        at_b = [self._evaluate(s, b) for s in range(len(self.data.segments))]
+        scale = max(max((np.abs(j).max() if j.size else 0.0) for _, j in at_a), 1e-12)
+        if all(np.allclose(ja, jb, rtol=1e-9, atol=1e-9 * scale) for (_, ja), (_, jb) in zip(at_a, at_b)):
             self.affine = True
-            self._affine_base = [(f, j, a) for f, j in zip(fa, ja)]
+            self._affine_base = [(f, j, a) for f, j in at_a]
 
     def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
-        """Nuisance parameters a fold must hold at their defaults: an effect has none."""
-        return np.zeros(self.size, dtype=bool)
+        return np.zeros(self.size, dtype=bool)  # an effect has no nuisance parameters
 
-    def evaluate(self, theta: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, p)`` per segment at the fit rows."""
+    def at_rows(self, segment: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         theta = np.asarray(theta, dtype=float)
-        if self.affine and self._affine_base is not None:
-            forces = [f + j @ (theta - a) for f, j, a in self._affine_base]
-            return forces, [j for _, j, _ in self._affine_base]
-        if self._cache is not None and self._cache_theta is not None and np.array_equal(theta, self._cache_theta):
-            return self._cache
-        self._cache = self._evaluate(theta)
-        self._cache_theta = theta.copy()
-        return self._cache
+        if self._affine_base is not None:
+            f, j, a = self._affine_base[segment]
+            return f + j @ (theta - a), j
+        key = theta.tobytes()
+        cached = self._cache.get(segment)
+        if cached is None or cached[0] != key:
+            cached = (key, self._evaluate(segment, theta))
+            self._cache[segment] = cached
+        return cached[1]
+
+    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+        seg = self.data.segments[segment]
+        if not self._active[segment]:
+            return np.zeros((seg.n, 3))
+        return seg.smooth_force(self._evaluators[segment].force(seg.states, theta))
+
+
+def make_term(data: FlightData, effect: Effect) -> Term:
+    """The term that evaluates ``effect`` on ``data``: a library effect through its CasADi function, and
+    discovery's own candidates (a motor lag, an affine thrust map, a residual's structure, a wall that ends)
+    through theirs."""
+    from discovery.motor_lag import LagTerm, MotorLag
+    from discovery.standins import Structure, StructureTerm
+    from discovery.thrust_map import ThrustMap, ThrustMapTerm
+    from discovery.wall_extent import BoundedWall, BoundedWallTerm
+
+    if isinstance(effect, BoundedWall):
+        return BoundedWallTerm(data, effect)
+    if isinstance(effect, MotorLag):
+        return LagTerm(data, effect)
+    if isinstance(effect, ThrustMap):
+        return ThrustMapTerm(data, effect)
+    if isinstance(effect, Structure):
+        return StructureTerm(data, effect)
+    return EffectTerm(data, effect)
+
+
+@dataclass
+class FitResult:
+    """Fitted effects and what the fit says about them."""
+
+    effects: list[Effect]  # with fitted parameters (the first flight's conditions)
+    theta: np.ndarray  # all parameters, packed by ``layout``
+    param_std: np.ndarray  # standard errors, same packing (NaN where held)
+    cost: float  # 0.5 * sum of squared residuals on the fitted samples
+    n_rows: int  # residual rows (3 per sample)
+    success: bool
+    message: str = ""
+    fold_theta: list[np.ndarray] = field(default_factory=list)  # per cross-validation fold
+    layout: ParameterLayout | None = None
+    held: np.ndarray | None = None  # (size,) bool: entries held at their value, not fitted
+
+    def param_dicts(self) -> list[dict[str, Any]]:
+        return [e.params_dict() for e in self.effects]
+
+    def std_dicts(self, flight: int = 0) -> list[dict[str, Any]]:
+        """Standard errors as each effect's named parameters (``flight``'s own entries for its conditions)."""
+        if self.layout is None:
+            return []
+        return self.layout.dicts(self.param_std, flight)
+
+    def flight_effects(self, flight: int) -> list[Effect]:
+        """The effects with ``flight``'s conditions (its own wind)."""
+        return self.effects if self.layout is None else self.layout.effects(self.theta, flight)
 
 
 class EffectFit:
@@ -176,54 +216,58 @@ class EffectFit:
     ``EffectFit(data, [make_effect("wall_suction"), ...], nominal_residual)``, then
     :meth:`fit` (all data or per-segment masks over the fit rows), :meth:`residuals` at
     any parameters and :meth:`cross_validate`. Everything here works on each segment's
-    :attr:`~discovery.residuals.Segment.fit_rows`; :func:`out_of_fold_residuals`
-    evaluates a result on every sample.
+    :attr:`~discovery.residuals.Segment.fit_rows`; :meth:`out_of_fold` evaluates a result on
+    every sample. ``keys`` name the effects (candidate keys; default their names) and
+    ``terms`` is a term cache shared between fits (see :class:`Fitter`).
     """
 
     def __init__(self, data: FlightData, effects: list[Effect], nominal_residual: list[np.ndarray],
-                 terms: dict[Any, _Term | LagTerm] | None = None):
+                 terms: dict[Any, Term] | None = None, keys: list[str] | None = None):
         self.data = data
         self.templates = list(effects)
+        self.layout = ParameterLayout(keys or [e.name for e in effects], self.templates, data.n_flights)
         self.rows = [seg.fit_rows for seg in data.segments]
         self.r_nom = [r[rows] for r, rows in zip(nominal_residual, self.rows)]
         self.folds = [seg.fold[rows] for seg, rows in zip(data.segments, self.rows)]
         cache = terms if terms is not None else {}
-        self.terms: list[_Term | LagTerm] = []
+        self.terms: list[Term] = []
         for effect in effects:
             key = term_key(effect)
             if key not in cache:
-                cache[key] = LagTerm(data, effect) if isinstance(effect, MotorLag) else _Term(data, effect)
+                cache[key] = make_term(data, effect)
             self.terms.append(cache[key])
-        self.sizes = [t.size for t in self.terms]
-        self._defaults = np.concatenate([e.param_vector() for e in effects]) if effects else np.zeros(0)
-        self.low = np.concatenate([t.low for t in self.terms]) if self.terms else np.zeros(0)
-        self.high = np.concatenate([t.high for t in self.terms]) if self.terms else np.zeros(0)
+        self.low, self.high = self.layout.low, self.layout.high
+
+    @property
+    def size(self) -> int:
+        return self.layout.size
 
     # ------------------------------------------------------------------ residuals
-    def _split(self, theta: np.ndarray) -> list[np.ndarray]:
-        out, index = [], 0
-        for size in self.sizes:
-            out.append(theta[index:index + size])
-            index += size
-        return out
+    def _parts(self, theta: np.ndarray, s: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        flight = self.data.segments[s].flight
+        return [term.at_rows(s, th) for term, th in zip(self.terms, self.layout.split(theta, flight))]
 
     def residuals(self, theta: np.ndarray) -> list[np.ndarray]:
         """Residual per segment ``(m, 3)`` at the fit rows with all effects at ``theta``."""
-        out = [r.copy() for r in self.r_nom]
-        for term, th in zip(self.terms, self._split(np.asarray(theta, dtype=float))):
-            forces, _ = term.evaluate(th)
-            for r, f in zip(out, forces):
-                r -= f
+        theta = np.asarray(theta, dtype=float)
+        out = []
+        for s, r in enumerate(self.r_nom):
+            r = r.copy()
+            for force, _ in self._parts(theta, s):
+                r -= force
+            out.append(r)
         return out
 
     def _jacobians(self, theta: np.ndarray) -> list[np.ndarray]:
-        """Jacobian of the residual ``(m, 3, p)`` per segment at the fit rows."""
-        parts: list[list[np.ndarray]] = [[] for _ in self.data.segments]
-        for term, th in zip(self.terms, self._split(theta)):
-            _, jacobians = term.evaluate(th)
-            for s, j in enumerate(jacobians):
-                parts[s].append(-j)
-        return [np.concatenate(p, axis=2) for p in parts]
+        """Jacobian of the residual ``(m, 3, size)`` per segment at the fit rows."""
+        out = []
+        for s, rows in enumerate(self.rows):
+            flight = self.data.segments[s].flight
+            jac = np.zeros((len(rows), 3, self.size))
+            for e, (_, j) in enumerate(self._parts(theta, s)):
+                jac[:, :, self.layout.index[e][flight]] -= j
+            out.append(jac)
+        return out
 
     def _stacked(self, theta: np.ndarray, masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         residual = self.residuals(theta)
@@ -241,6 +285,9 @@ class EffectFit:
         free = np.ones(theta0.size, dtype=bool) if free is None else free
         cache: dict[str, Any] = {}
         x0 = np.clip(theta0, self.low, self.high)
+        if not free.any():
+            r, j = self._stacked(x0, masks)
+            return _Solution(x0, r, np.zeros((r.size, 0)))
 
         def both(x_free):
             key = x_free.tobytes()
@@ -261,12 +308,13 @@ class EffectFit:
         result.x = theta
         return result
 
-    def starts(self, previous: dict[str, np.ndarray] | None = None) -> list[np.ndarray]:
-        """Starting points: previous values where known, else the effect's default or :data:`STARTS`."""
+    def starts(self, previous: dict[str, np.ndarray] | None = None,
+               base: np.ndarray | None = None) -> list[np.ndarray]:
+        """Starting points: previous values (by key) where known, else the effect's default or :data:`STARTS`."""
         per_term: list[list[np.ndarray]] = []
-        for term, template in zip(self.terms, self.templates):
-            if previous and template.name in previous:
-                per_term.append([previous[template.name]])
+        for key, term, template in zip(self.layout.keys, self.terms, self.templates):
+            if previous and key in previous:
+                per_term.append([np.asarray(previous[key], dtype=float)])
             elif term.affine or template.name not in STARTS:
                 per_term.append([template.param_vector()])
             else:
@@ -276,50 +324,65 @@ class EffectFit:
                 per_term.append(options)
         # one start per option of the term with most options; the others keep their first
         n = max((len(o) for o in per_term), default=1)
-        return [np.concatenate([o[min(i, len(o) - 1)] for o in per_term]) if per_term else np.zeros(0)
-                for i in range(n)]
+        out = []
+        for i in range(n):
+            vectors = {key: o[min(i, len(o) - 1)] for key, o in zip(self.layout.keys, per_term)}
+            out.append(self.layout.pack(vectors, base))
+        return out
 
     def fit(self, masks: list[np.ndarray] | None = None, previous: dict[str, np.ndarray] | None = None,
-            theta0: np.ndarray | None = None) -> FitResult:
-        """Fit on the fit rows selected by ``masks`` (all if None), from several starts."""
+            theta0: np.ndarray | None = None, held: np.ndarray | None = None) -> FitResult:
+        """Fit on the fit rows selected by ``masks`` (all if None), from several starts; the entries ``held``
+        (a mask over the packed vector) keep their value in ``theta0`` or the start."""
         masks = masks or [np.ones(len(rows), dtype=bool) for rows in self.rows]
         if not self.terms:  # nothing to fit: the nominal model
             rows = np.concatenate([r[m].reshape(-1) for r, m in zip(self.r_nom, masks)])
-            return FitResult([], np.zeros(0), np.zeros(0), 0.5 * float(rows @ rows), rows.size, True, "no parameters")
+            return FitResult([], np.zeros(0), np.zeros(0), 0.5 * float(rows @ rows), rows.size, True, "no parameters",
+                             layout=self.layout, held=np.zeros(0, dtype=bool))
+        held = np.zeros(self.size, dtype=bool) if held is None else np.asarray(held, dtype=bool)
         starts = [theta0] if theta0 is not None else self.starts(previous)
         best = None
         for x0 in starts:
-            result = self._solve(np.asarray(x0, dtype=float), masks)
+            result = self._solve(np.asarray(x0, dtype=float), masks, free=~held)
             if best is None or result.cost < best.cost:
                 best = result
         assert best is not None  # starts is never empty
         theta = best.x
-        std = self._standard_errors(theta, masks, best.jac)
-        effects = [template.with_params(th) for template, th in zip(self.templates, self._split(theta))]
-        return FitResult(effects, theta, std, float(best.cost), int(best.fun.size), bool(best.success), best.message)
+        std = np.full(self.size, np.nan)  # an entry held at a value has no standard error
+        std[~held] = self._standard_errors(theta, masks, ~held)
+        effects = self.layout.effects(theta, 0)
+        return FitResult(effects, theta, std, float(best.cost), int(best.fun.size), bool(best.success),
+                         str(best.message), layout=self.layout, held=held)
 
-    def _standard_errors(self, theta: np.ndarray, masks: list[np.ndarray], jac: np.ndarray) -> np.ndarray:
-        """Heteroscedasticity- and autocorrelation-consistent (Newey-West) standard errors.
+    def _standard_errors(self, theta: np.ndarray, masks: list[np.ndarray], free: np.ndarray) -> np.ndarray:
+        """Heteroscedasticity- and autocorrelation-consistent (Newey-West) standard errors of the ``free`` entries.
 
         ``cov = A^-1 B A^-1`` with ``A = J^T J`` and ``B`` the long-run covariance of the
         per-row scores ``g_k = J_k^T r_k`` (all three axes of a row together), summed over
-        lags up to :func:`hac_lags` with Bartlett weights, within each segment. Unlike
-        ``sigma^2 (J^T J)^-1`` this lets each axis have its own noise level (a vertical
-        parameter is not credited with the quieter horizontal axes) and lets the noise be
-        correlated over the smoothing window.
+        lags up to :meth:`~discovery.residuals.Segment.hac_lags` with Bartlett weights,
+        within each segment. Unlike ``sigma^2 (J^T J)^-1`` this lets each axis have its own
+        noise level (a vertical parameter is not credited with the quieter horizontal axes)
+        and lets the noise be correlated over the smoothing window.
         """
-        n, p = jac.shape
+        p = int(free.sum())
         if p == 0:
             return np.zeros(0)
-        a_inv = np.linalg.pinv(jac.T @ jac)
+        residuals, jacobians = self.residuals(theta), self._jacobians(theta)
+        a = np.zeros((p, p))
         b = np.zeros((p, p))
-        for seg, r, j, mask in zip(self.data.segments, self.residuals(theta), self._jacobians(theta), masks):
+        n = 0
+        for seg, r, j, mask in zip(self.data.segments, residuals, jacobians, masks):
+            j = j[:, :, free]
+            rows = j[mask].reshape(-1, p)
+            a += rows.T @ rows
+            n += rows.shape[0]
             scores = np.einsum("ma,map->mp", r * mask[:, None], j)
             b += scores.T @ scores
-            lags = hac_lags(seg)
+            lags = seg.hac_lags()
             for lag in range(1, min(lags, len(scores) - 1) + 1):
                 c = scores[lag:].T @ scores[:-lag]
                 b += (1.0 - lag / (lags + 1.0)) * (c + c.T)
+        a_inv = np.linalg.pinv(a)
         cov = a_inv @ b @ a_inv * n / max(n - p, 1)
         return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
@@ -328,19 +391,21 @@ class EffectFit:
         """Out-of-fold residuals per segment at the fit rows, each fold refitted (from ``full``) without it.
 
         Returns the out-of-fold residuals and the fold parameter vectors (also stored in ``full.fold_theta``).
+        Entries ``full`` held stay held in every fold.
         """
         out = [np.empty_like(r) for r in self.r_nom]
         fold_theta = []
+        held_full = full.held if full.held is not None and full.held.size == self.size \
+            else np.zeros(self.size, dtype=bool)
         for k in range(self.data.n_folds):
             masks = [seg.train_mask[k][rows] for seg, rows in zip(self.data.segments, self.rows)]
             if self.terms and any(m.any() for m in masks):
                 # a nuisance parameter that reaches the held-out rows (a lag's start error, its segment's start
                 # held out) is not fitted: it takes its default, so no held-out row sees a value fitted to it
-                held = [folds == k for folds in self.folds]
-                fixed = np.concatenate([t.fold_fixed(th, masks, held)
-                                        for t, th in zip(self.terms, self._split(full.theta))])
-                start = np.where(fixed, self._defaults, full.theta)
-                theta_k = self._solve(start, masks, CV_TOL, free=~fixed).x
+                held_rows = [folds == k for folds in self.folds]
+                fixed = self._fold_fixed(full.theta, masks, held_rows)
+                start = np.where(fixed, self.layout.defaults, full.theta)
+                theta_k = self._solve(start, masks, CV_TOL, free=~(fixed | held_full)).x
             else:
                 theta_k = full.theta.copy()
             fold_theta.append(theta_k)
@@ -351,22 +416,117 @@ class EffectFit:
         full.fold_theta = fold_theta
         return out, fold_theta
 
+    def _fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
+        fixed = np.zeros(self.size, dtype=bool)
+        for e, term in enumerate(self.terms):
+            own = term.fold_fixed(self.layout.split(theta, 0)[e], train, held)
+            if own.any():
+                fixed[self.layout.index[e][0][own]] = True
+        return fixed
 
-def out_of_fold_residuals(data: FlightData, effects: list[Effect], fold_theta: list[np.ndarray],
-                          nominal_residual: list[np.ndarray]) -> list[np.ndarray]:
-    """Residual at every sample, each fold's samples against the effects fitted without that fold."""
-    out = [r.copy() for r in nominal_residual]
-    for seg_index, seg in enumerate(data.segments):
-        index = 0
-        for effect in effects:
-            size = effect.param_size
-            model = AeroModel([effect])
-            if not effect.applies_to(seg.scene.structure):
-                index += size
-                continue
-            evaluator = seg.evaluator(model, data.rotor_positions_body)
-            theta = np.stack([fold_theta[k][index:index + size] for k in seg.fold]) if fold_theta else \
-                effect.param_vector()
-            out[seg_index] -= seg.smooth_force(evaluator.force(seg.states, theta))
-            index += size
-    return out
+    def out_of_fold(self, fold_theta: list[np.ndarray], nominal_residual: list[np.ndarray]) -> list[np.ndarray]:
+        """Residual at every sample, each fold's samples against the effects fitted without that fold."""
+        out = [r.copy() for r in nominal_residual]
+        for s, seg in enumerate(self.data.segments):
+            for e, term in enumerate(self.terms):
+                rows = self.layout.index[e][seg.flight]
+                theta = np.stack([fold_theta[k][rows] for k in seg.fold]) if fold_theta else \
+                    self.layout.defaults[rows]
+                out[s] -= term.smoothed(s, theta)
+        return out
+
+    def forces(self, theta: np.ndarray) -> list[list[np.ndarray]]:
+        """Each effect's ``K[F]`` ``(n, 3)`` at every sample, per segment: ``out[e][s]``."""
+        return [[term.smoothed(s, self.layout.split(theta, seg.flight)[e]) for s, seg in enumerate(self.data.segments)]
+                for e, term in enumerate(self.terms)]
+
+
+@dataclass
+class _Solution:
+    """What :meth:`EffectFit._solve` returns when nothing is free (the shape of ``least_squares``' result)."""
+
+    x: np.ndarray
+    fun: np.ndarray
+    jac: np.ndarray
+    cost: float = field(init=False)
+    success: bool = True
+    message: str = "nothing free"
+
+    def __post_init__(self) -> None:
+        self.cost = 0.5 * float(self.fun @ self.fun)
+
+
+@dataclass
+class Candidate:
+    """One effect set tried: its full-data fit, held-out residual and score."""
+
+    names: list[str]  # candidate keys
+    fit: FitResult
+    cv_residual: list[np.ndarray]
+    mse: float  # held-out mean squared residual (vector norm), N^2
+    mse_axes: np.ndarray  # per world axis, N^2
+    score: float
+    problem: EffectFit | None = field(default=None, repr=False)
+
+    @property
+    def n_params(self) -> int:
+        return int(self.fit.theta.size) if self.fit.held is None else int((~self.fit.held).sum())
+
+    def previous(self) -> dict[str, np.ndarray]:
+        """Fitted parameter vectors by candidate key (the first flight's), as starting values for other sets."""
+        return {key: e.param_vector() for key, e in zip(self.names, self.fit.effects)}
+
+
+#: ``score(mse_axes, layout, held) -> float``, lower is better (see :func:`discovery.selection.score`)
+Scorer = Callable[[np.ndarray, ParameterLayout, np.ndarray], float]
+
+
+class Fitter:
+    """Every fit of one run on one prepared data set: the one owner of the term and candidate caches.
+
+    ``Fitter(data, r_nom, templates, scorer)``; :meth:`candidate` fits a set of candidate keys
+    (all parameters jointly, from previous values where given), cross-validates it and scores
+    it, once per set (and per set of held entries); :meth:`add` registers another template.
+    """
+
+    def __init__(self, data: FlightData, r_nom: list[np.ndarray], templates: dict[str, Effect], scorer: Scorer):
+        self.data = data
+        self.r_nom = r_nom
+        self.templates = dict(templates)
+        self.scorer = scorer
+        self.terms: dict[Any, Term] = {}
+        self._fits: dict[tuple, Candidate] = {}
+
+    def add(self, key: str, template: Effect) -> None:
+        if key in self.templates and self.templates[key] is not template:
+            self._fits = {k: v for k, v in self._fits.items() if key not in k[0]}
+        self.templates[key] = template
+
+    def problem(self, keys: list[str]) -> EffectFit:
+        return EffectFit(self.data, [self.templates[k] for k in keys], self.r_nom, self.terms, list(keys))
+
+    def candidate(self, keys: list[str], previous: dict[str, np.ndarray] | None = None,
+                  hold: dict[str, dict[int, float]] | None = None) -> Candidate:
+        """Fit, cross-validate and score the set ``keys``; ``previous`` holds starting values by key and
+        ``hold`` entries of effects' own vectors to keep at a value (``{key: {entry: value}}``)."""
+        hold = {k: v for k, v in (hold or {}).items() if v and k in keys}
+        cache_key = (tuple(keys), tuple(sorted((k, tuple(sorted(v.items()))) for k, v in hold.items())))
+        if cache_key not in self._fits:
+            problem = self.problem(list(keys))
+            start = {k: previous[k] for k in keys if previous and k in previous}
+            held_mask = np.zeros(problem.size, dtype=bool)
+            theta0 = None
+            if hold:
+                starts = problem.starts(start)
+                theta0 = starts[0]
+                for e, key in enumerate(problem.layout.keys):
+                    for entry, value in hold.get(key, {}).items():
+                        for rows in problem.layout.index[e]:
+                            held_mask[rows[entry]] = True
+                            theta0[rows[entry]] = value
+            fit = problem.fit(previous=start, theta0=theta0, held=held_mask)
+            cv, _ = problem.cross_validate(fit)
+            axes = np.mean(np.concatenate(cv) ** 2, axis=0) if cv else np.zeros(3)
+            score = self.scorer(axes, problem.layout, fit.held if fit.held is not None else held_mask)
+            self._fits[cache_key] = Candidate(list(keys), fit, cv, float(axes.sum()), axes, score, problem)
+        return self._fits[cache_key]

@@ -61,6 +61,7 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
+from dataclasses import fields as dataclass_fields
 from pathlib import Path
 from typing import Any
 
@@ -143,6 +144,8 @@ class NominalVehicle:
     drag: tuple[float, float, float] = (0.0, 0.0, 0.0)  # N s/m, body-frame linear drag (paper Eq. 4)
     thrust_map: ThrustMap | None = field(default=None, compare=False)  # how commands became newtons (import)
     motor_time_constant: float = 0.0  # s, first-order lag of the produced thrust behind the logged one (0: none)
+    #: the vehicle block's keys that gave a value (the others took their defaults)
+    given: frozenset[str] = field(default=frozenset({"mass", "rotor_positions", "drag"}), compare=False)
 
     @property
     def rotor_positions_array(self) -> np.ndarray:
@@ -155,8 +158,29 @@ class NominalVehicle:
         in which case it is set to twice the weight (the log says nothing about it).
         """
         thrust_max = 27.0 if self.mass * GRAVITY < 27.0 / 1.2 else 2.0 * self.mass * GRAVITY
-        return VehicleParams(mass=self.mass, rotor_positions=self.rotor_positions, drag=self.drag,
-                             thrust_max=thrust_max, motor_time_constant=self.motor_time_constant)
+        return VehicleParams(mass=self.mass, arm_length=self.arm_length, rotor_positions=self.rotor_positions,
+                             drag=self.drag, thrust_max=thrust_max, motor_time_constant=self.motor_time_constant)
+
+    @property
+    def arm_length(self) -> float:
+        """The rotors' mean horizontal distance from the centre of mass (m)."""
+        return float(np.mean(np.linalg.norm(self.rotor_positions_array[:, :2], axis=1)))
+
+    def vehicle_fields(self, motor_lag_found: bool = False) -> dict[str, str]:
+        """Where each field of :meth:`to_vehicle_params`' vehicle came from: the vehicle block (``given``), derived
+        from it, found by discovery, or the paper vehicle's default (the log says nothing about it)."""
+        default = "defaulted: the paper's 1 kg ducted vehicle (the log says nothing about it)"
+        out = {f.name: default for f in dataclass_fields(VehicleParams)}
+        out["mass"] = "given"
+        out["rotor_positions"] = "given"
+        out["arm_length"] = "derived: the rotors' mean horizontal distance from the centre of mass"
+        out["drag"] = "given" if "drag" in self.given else "defaulted: 0 (the vehicle block gives no drag)"
+        out["thrust_max"] = ("defaulted: 27 N" if self.mass * GRAVITY < 27.0 / 1.2 else
+                             "derived: twice the weight (the default 27 N would not lift it)")
+        out["motor_time_constant"] = ("given" if "motor_time_constant" in self.given else
+                                      "found: the motor lag discovery fitted" if motor_lag_found else
+                                      "defaulted: 0 (no lag given or found)")
+        return out
 
     @classmethod
     def from_vehicle_params(cls, vehicle: VehicleParams) -> NominalVehicle:
@@ -570,7 +594,8 @@ def parse_sidecar(path: Path, text: str, data: Any) -> tuple[NominalVehicle, Sce
         thrust_map = ThrustMap(kind, coefficient, source)
     motor_time_constant = (check.number("vehicle.motor_time_constant", vehicle_data["motor_time_constant"], 0.0,
                                         MAX_TIME_CONSTANT) if "motor_time_constant" in vehicle_data else 0.0)
-    vehicle = NominalVehicle(mass, rotor_positions, drag, thrust_map, motor_time_constant)
+    vehicle = NominalVehicle(mass, rotor_positions, drag, thrust_map, motor_time_constant,
+                             frozenset(k for k in vehicle_data if k in _SCHEMA_VEHICLE))
     try:
         vehicle.to_vehicle_params()
     except ValueError as exc:

@@ -311,6 +311,9 @@ def fly(env_id: str | None = None, policy: str = "pid", effects: Any = None, see
         truth = scenario_path(csv_path)
         if truth.exists() and not overwrite:
             raise FileExistsError(f"{truth} exists; pass overwrite=True (or --overwrite) to replace it")
+        from discovery.closed_loop import file_sha256
+
+        record["log_sha256"] = file_sha256(csv_path)  # the closed-loop check calls this world ground truth of that log
         truth.write_text(json.dumps(record, indent=2) + "\n")
         summary["files"] = [str(csv_path), str(json_path), str(truth)]
         log.source = str(csv_path)

@@ -109,7 +109,7 @@ class LagTerm:
         self.low, self.high = effect.param_bounds()
         self._rows = [seg.fit_rows for seg in data.segments]
         self._z_steps = [step_average_samples(seg.states.R_body_to_world[:, :, 2]) for seg in data.segments]
-        self._cache: tuple[bytes, tuple[list[np.ndarray], list[np.ndarray]]] | None = None
+        self._cache: dict[int, tuple[bytes, tuple[np.ndarray, np.ndarray]]] = {}
 
     def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
         """The start errors a cross-validation fold holds settled (0): those whose effect (rms) reaches its
@@ -117,32 +117,45 @@ class LagTerm:
         out = np.zeros(self.size, dtype=bool)
         if self.size == 1:
             return out
-        _, jacobians = self.evaluate(theta)
-        for s, (jacobian, train_rows, held_rows) in enumerate(zip(jacobians, train, held)):
-            column = jacobian[:, :, 1 + s]
+        for s, (train_rows, held_rows) in enumerate(zip(train, held)):
+            column = self.at_rows(s, theta)[1][:, :, 1 + s]
             share = SEEN_SHARE**2 * float(np.sum(column**2))
             out[1 + s] = float(np.sum(column[held_rows] ** 2)) >= share or float(np.sum(column[train_rows] ** 2)) <= share
         return out
 
-    def evaluate(self, theta: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, p)`` per segment at the fit rows."""
-        theta = np.asarray(theta, dtype=float).reshape(-1)
-        if self._cache is not None and self._cache[0] == theta.tobytes():
-            return self._cache[1]
+    def _steps(self, s: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         tau, starts = float(theta[0]), theta[1:]
-        forces, jacobians = [], []
-        for s, (seg, z_steps, rows) in enumerate(zip(self.data.segments, self._z_steps, self._rows)):
-            start = float(starts[s]) if starts.size else 0.0
-            force, jacobian = lag_force_steps(seg.thrust_logged, seg.t, z_steps, tau, start)
-            smoothed = self.scale * seg.kernel.step_average(jacobian, rows)
-            full = np.zeros(smoothed.shape[:2] + (self.size,))
-            full[:, :, 0] = smoothed[:, :, 0]
-            if starts.size:
-                full[:, :, 1 + s] = smoothed[:, :, 1]
-            forces.append(self.scale * seg.kernel.step_average(force, rows))
-            jacobians.append(full)
-        self._cache = (theta.tobytes(), (forces, jacobians))
-        return forces, jacobians
+        seg = self.data.segments[s]
+        start = float(starts[s]) if starts.size else 0.0
+        return lag_force_steps(seg.thrust_logged, seg.t, self._z_steps[s], tau, start)
+
+    def at_rows(self, segment: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, p)`` at the segment's fit rows."""
+        theta = np.asarray(theta, dtype=float).reshape(-1)
+        key = theta.tobytes()
+        cached = self._cache.get(segment)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        seg, rows = self.data.segments[segment], self._rows[segment]
+        force, jacobian = self._steps(segment, theta)
+        smoothed = self.scale * seg.kernel.step_average(jacobian, rows)
+        full = np.zeros(smoothed.shape[:2] + (self.size,))
+        full[:, :, 0] = smoothed[:, :, 0]
+        if theta.size > 1:
+            full[:, :, 1 + segment] = smoothed[:, :, 1]
+        result = (self.scale * seg.kernel.step_average(force, rows), full)
+        self._cache[segment] = (key, result)
+        return result
+
+    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+        """``K[F]`` ``(n, 3)`` at every sample (one parameter vector for the whole segment)."""
+        theta = np.asarray(theta, dtype=float)
+        if theta.ndim == 2:
+            if not np.all(theta == theta[:1]):
+                raise ValueError("a motor lag is evaluated with one parameter vector per segment")
+            theta = theta[0]
+        force, _ = self._steps(segment, theta)
+        return self.scale * self.data.segments[segment].kernel.step_average(force)
 
 
 def lag_force_steps(thrust_logged: Any, t: np.ndarray, z_steps: np.ndarray, tau: float,

@@ -13,6 +13,9 @@ open-loop predictions against measurements.
 ``prediction.png``
     logged against predicted displacement over the prediction horizon, per world axis,
     for the nominal and the discovered model.
+``unexplained_shape.png``, ``unexplained_where.png``
+    when a residual is left that the model does not explain: its shape against the state it
+    depends on, or the residual against time and its mean over the position map.
 """
 
 from __future__ import annotations
@@ -161,6 +164,38 @@ def plot_all(found, out_dir: str | Path) -> list[Path]:
         _margins(fig, left=0.8, top=0.4)
         path = out / "unexplained_shape.png"
         fig.savefig(path, dpi=110)
+        written.append(path)
+
+    # ---------------------------------------------------------------- where an unexplained residual lives
+    left = found.unexplained_ or {}
+    if left.get("lives_in") in ("time (periodic)", "time (slow)", "position"):
+        direction = np.asarray(left.get("direction_world") or (0.0, 0.0, 1.0), dtype=float)
+        along = after @ direction
+        fig = Figure(figsize=(11, 3.8))
+        ax_t, ax_m = fig.subplots(1, 2)
+        sample = _thin(len(after))
+        ax_t.plot(found.data_.times[sample], along[sample], ".", ms=2, color="0.4")
+        ax_t.set_xlabel("time in log (s)")
+        ax_t.set_ylabel(f"held-out residual along {np.round(direction, 2).tolist()} (N)")
+        time = left.get("time") or {}
+        ax_t.set_title(f"in time: peak {time.get('peak_hz')} Hz, {time.get('peak_amplitude_N')} N amplitude")
+        cells = left.get("position_cells") or []
+        if cells:
+            u_edges = sorted({c["along_m"][0] for c in cells} | {c["along_m"][1] for c in cells})
+            h_edges = sorted({c["height_m"][0] for c in cells} | {c["height_m"][1] for c in cells})
+            values = np.full((len(h_edges) - 1, len(u_edges) - 1), np.nan)
+            for cell in cells:
+                i, j = u_edges.index(cell["along_m"][0]), h_edges.index(cell["height_m"][0])
+                values[j, i] = float(np.asarray(cell["force_N"]) @ direction)
+            limit = float(np.nanmax(np.abs(values))) or 1.0
+            mesh = ax_m.pcolormesh(u_edges, h_edges, values, cmap="coolwarm", vmin=-limit, vmax=limit)
+            fig.colorbar(mesh, ax=ax_m, label="N")
+            ax_m.set_xlabel(f"{left['position'].get('along')} (m)")
+            ax_m.set_ylabel("height (m)")
+            ax_m.set_title("mean over the position map, along that direction")
+        _margins(fig, left=0.8, top=0.45, wspace=0.8, columns=2)
+        path = out / "unexplained_where.png"
+        fig.savefig(path, dpi=90)
         written.append(path)
 
     return written

@@ -69,10 +69,12 @@ def windows(data: FlightData, horizon_s: float = DEFAULT_HORIZON_S,
 
 
 def predict(seg: Segment, starts: np.ndarray, steps: int, model: AeroModel, rotor_positions_body: np.ndarray,
-            theta: np.ndarray | None = None) -> np.ndarray:
+            theta: np.ndarray | None = None, thrust_map: np.ndarray | None = None) -> np.ndarray:
     """Predicted positions ``(w, 3)`` at ``steps`` samples after each start, replaying the logged thrust.
 
-    ``theta``: the model's parameters, ``(param_size,)`` or one row per window (default: the model's own).
+    ``theta``: the model's parameters, ``(param_size,)`` or one row per window (default: the model's own);
+    ``thrust_map``: an affine thrust map ``(scale, offset)`` (or one row per window) applied to the replayed
+    thrust (:mod:`discovery.thrust_map`).
     """
     theta = model.theta() if theta is None else np.asarray(theta, dtype=float)
     evaluator = seg.evaluator(model, rotor_positions_body) if model.effects else None
@@ -86,7 +88,11 @@ def predict(seg: Segment, starts: np.ndarray, steps: int, model: AeroModel, roto
         k = starts + j
         dt = (seg.t[k + 1] - seg.t[k])[:, None]
         z_body = 0.5 * (R_all[k, :, 2] + R_all[k + 1, :, 2])
-        force = seg.thrust[k, None] * z_body
+        thrust = seg.thrust[k]
+        if thrust_map is not None:
+            scale, offset = np.atleast_2d(thrust_map).T
+            thrust = scale * thrust + offset
+        force = thrust[:, None] * z_body
         if evaluator is not None:
             states = SampleStates(p, R_all[k], v, w_all[k], f_all[k], m)
             force = force + evaluator.force(states, theta)
@@ -96,21 +102,29 @@ def predict(seg: Segment, starts: np.ndarray, steps: int, model: AeroModel, roto
     return p
 
 
-def prediction_pairs(data: FlightData, model: AeroModel, fold_theta: list[np.ndarray] | None = None,
-                     horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S
+def prediction_pairs(data: FlightData, model: AeroModel,
+                     fold_theta: list[np.ndarray] | dict[int, list[np.ndarray]] | None = None,
+                     horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S,
+                     thrust_maps: dict[int, list[np.ndarray]] | None = None
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Start, predicted and logged positions ``(w, 3)`` at the horizon of every held-out window.
 
     ``model`` gives the structure; ``fold_theta[k]`` its parameters fitted without fold
-    ``k`` (default: the model's own parameters for every fold).
+    ``k`` (default: the model's own parameters for every fold), or ``fold_theta[f][k]`` per
+    flight ``f`` when flights have their own conditions; ``thrust_maps[f][k]`` an affine thrust
+    map ``(scale, offset)`` per flight and fold.
     """
     starts, predicted, measured = [], [], []
     for w in windows(data, horizon_s, stride_s):
         seg = data.segments[w.segment]
         theta = None
         if fold_theta is not None and model.param_size:
-            theta = np.stack([fold_theta[k] for k in w.fold])
-        predicted.append(predict(seg, w.starts, w.steps, model, data.rotor_positions_body, theta))
+            per_fold = fold_theta[seg.flight] if isinstance(fold_theta, dict) else fold_theta
+            theta = np.stack([per_fold[k] for k in w.fold])
+        thrust_map = None
+        if thrust_maps is not None:
+            thrust_map = np.stack([thrust_maps[seg.flight][k] for k in w.fold])
+        predicted.append(predict(seg, w.starts, w.steps, model, data.rotor_positions_body, theta, thrust_map))
         assert seg.p_measured is not None, "segment without logged positions"
         measured.append(seg.p_measured[w.starts + w.steps])
         starts.append(seg.p_measured[w.starts])

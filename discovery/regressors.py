@@ -117,8 +117,9 @@ def localise_residual(data: FlightData, residual: np.ndarray, candidates: list[R
     """Which regressor the residual ``(N, 3)`` depends on, by cross-validated bin means.
 
     Returns ``{"regressor", "unit", "explained_fraction", "range", "direction_world",
-    "fraction_of_flight", "time_intervals", "ranking"}``; ``explained_fraction`` is the
-    share of the held-out residual energy the best regressor's bin means predict.
+    "fraction_of_flight", "time_intervals", "ranking", "all_explained"}``; ``explained_fraction`` is the
+    share of the held-out residual energy the best regressor's bin means predict (``ranking``: the best
+    five regressors, ``all_explained``: every one).
     ``time`` is ranked but not used to localise (it says when, not what).
     """
     candidates = candidates if candidates is not None else regressors(data)
@@ -151,14 +152,14 @@ def localise_residual(data: FlightData, residual: np.ndarray, candidates: list[R
         edges, index = _bins(picked[1].values, n_bins)
         best = (picked[0], picked[1], edges, index)
     if best is None:
-        return {"regressor": None, "explained_fraction": 0.0, "ranking": ranking}
+        return {"regressor": None, "explained_fraction": 0.0, "ranking": ranking, "all_explained": ranking}
     constant = _constant_explained(residual, folds, data.n_folds, energy)
     if best[0] > 0 and best[0] - constant < _EVERYWHERE_MARGIN * best[0]:
         # the residual is about the same everywhere: no regressor localises it
         mask = np.ones(len(residual), dtype=bool)
         return {"regressor": "everywhere", "unit": None, "explained_fraction": round(best[0], 4), "range": None,
                 "fraction_of_flight": 1.0, "direction_world": _direction(residual, mask),
-                "time_intervals": time_intervals(data, mask), "ranking": ranking[:5]}
+                "time_intervals": time_intervals(data, mask), "ranking": ranking[:5], "all_explained": ranking}
     explained, reg, edges, index = best
     n_b = len(edges) - 1
     counts = np.bincount(index[index >= 0], minlength=n_b)
@@ -175,7 +176,7 @@ def localise_residual(data: FlightData, residual: np.ndarray, candidates: list[R
     mask = region.pop("mask")
     return {"regressor": reg.name, "unit": reg.unit, "explained_fraction": round(explained, 4), **region,
             "direction_world": _direction(residual, mask), "time_intervals": time_intervals(data, mask),
-            "ranking": ranking[:5]}
+            "ranking": ranking[:5], "all_explained": ranking}
 
 
 def _constant_explained(residual: np.ndarray, folds: np.ndarray, n_folds: int, energy: float) -> float:

@@ -22,9 +22,42 @@ Keys:
     position error at the prediction horizon (m).
 ``model``
     path of the updated model file (``null`` if not written).
+``noise``
+    the log's noise floor (:func:`discovery.noise.noise_floor`): ``floor_N``, the held-out rms
+    force residual measurement noise and unlogged disturbances leave (a perfect model's), per
+    axis and the fitted noise levels.
 ``unexplained``
-    ``null``, or ``{"force_rms_N", "where"}`` when a significant residual is left that no
-    candidate explains, with where it is (regressor, range, direction, times).
+    ``null`` when the held-out residual is within :data:`~discovery.noise.FLOOR_FACTOR` times the
+    noise floor (or exceeds it by less than 0.2 % of the weight) and no regressor localises it;
+    else ``{"force_rms_N", "noise_floor_N", "times_noise_floor", "excess_rms_N", "share_of_weight",
+    "lives_in", "where", "shape", "position", "position_cells", "time", "direction_world"}``: how much
+    is left beyond the noise and where it lives (:mod:`discovery.unexplained`): ``lives_in`` is
+    ``states`` (``where``: the regressor, range, direction and times; ``shape``: piecewise linear in
+    it), ``position`` (``position``: a region of the flight over height and position along the
+    wall; ``position_cells``: the map), ``time (periodic)`` or ``time (slow)`` (``time``: the peak of
+    its spectrum's excess over the noise, its amplitude, the share below 0.5 Hz).
+``stand_ins``
+    effects the selection kept that only stood in for the unexplained residual
+    (:mod:`discovery.standins`): ``{"effect", "params", "with_structure", "reason"}``; not written.
+``cancelling``
+    sets of effects whose forces cancelled each other (look-alikes near hover): their forces, what was
+    kept (the simplest account within a parameter's price of the best held-out score) and the manoeuvre
+    that separates them (:mod:`discovery.cancelling`).
+``wall_edge``
+    ``null``, or where wall 0 seems to end (:mod:`discovery.wall_extent`): the axis, the side the wall is on,
+    the edge and the share of the fitted suction the data show on either side.
+``vehicle_fields``
+    where each field of the model file's vehicle came from: given in the vehicle block, derived from it,
+    found (a motor lag), or defaulted (the paper vehicle's value; the log says nothing about it).
+``left_out``
+    the stretches of each log left out and why (held up, ground contact).
+``withheld``
+    ``null``, or the effects a model held that were not written because its held-out force gap was
+    not smaller than the nominal model's.
+``flights``
+    with several logs: ``conditions``, each flight's own wind with its standard error (the model
+    file is for still air), and ``held_out``, each flight's force error predicted by the model fitted
+    on the other flights.
 ``closed_loop``
     ``null``, or the closed-loop check (:mod:`discovery.closed_loop`).
 ``undetermined``
@@ -90,7 +123,8 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
     selection = found.selection_
     if selection is None:  # nothing to fit
         report = {"effects": [], "motor_lag": None, "gap_before": found.gap_before_, "gap_after": found.gap_after_,
-                  "model": None if model_path is None else str(model_path), "unexplained": None,
+                  "model": None if model_path is None else str(model_path), "noise": found.noise_,
+                  "unexplained": None, "withheld": None, "flights": found.flights_,
                   "closed_loop": closed_loop, "notes": list(found.notes_), "limits": list(found.limits_),
                   "details": {"logs": _logs(found), "runtime_s": round(found.runtime_s_, 3)}}
         return _clean(report)
@@ -113,7 +147,15 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "gap_before": found.gap_before_,
         "gap_after": found.gap_after_,
         "model": None if model_path is None else str(model_path),
+        "noise": found.noise_,
         "unexplained": found.unexplained_,
+        "withheld": found.withheld_,
+        "stand_ins": [{k: v for k, v in item.items() if k != "key"} for item in found.stand_ins_],
+        "cancelling": found.cancelling_,
+        "vehicle_fields": found.model_.vehicle_fields,
+        "wall_edge": found.wall_edge_,
+        "left_out": found.left_out_,
+        "flights": found.flights_,
         "closed_loop": closed_loop,
         "notes": list(found.notes_),
         "limits": list(found.limits_),
@@ -168,15 +210,34 @@ def format_summary(report: dict[str, Any]) -> str:
         lines.append(f"found a motor lag: time_constant={_fmt(lag['time_constant_s'])} +- {_fmt(lag['std_s'])} s (the "
                      f"rotors produce the logged thrust late); explains {100 * lag['explained']:.0f} % of the held-out "
                      "residual; written as the model's vehicle motor_time_constant")
+    noise = (report.get("noise") or {}).get("floor_N")
+    after = (report.get("gap_after") or {}).get("force_rms_N")
     if not report["effects"] and not (lag and lag["kept"]):
         if "selection" not in report["details"]:
             lines.append("found nothing: the logs hold no airborne flight to fit (see the notes below)")
         elif report.get("unexplained"):
             lines.append("found no effect of the library that explains the residual (see UNEXPLAINED below)")
-        else:
-            lines.append("found nothing: the logs agree with the nominal model within noise (no candidate explains "
+        elif noise and after is not None:
+            lines.append(f"found nothing: the held-out force residual, {after:.4f} N rms, is "
+                         f"{after / noise:.2g} times the log's noise floor ({noise:.4f} N, measured from the log): the "
+                         "logs agree with the nominal model within noise (no candidate explains "
                          f"{100 * MIN_SHARE:g} % of the held-out residual energy and a force of "
                          f"{100 * MIN_WEIGHT_SHARE:g} % of the weight)")
+        else:
+            lines.append("found nothing: no candidate explains "
+                         f"{100 * MIN_SHARE:g} % of the held-out residual energy and a force of "
+                         f"{100 * MIN_WEIGHT_SHARE:g} % of the weight (the log has no band to measure its noise in)")
+    elif not report.get("unexplained") and noise and after is not None:
+        lines.append(f"what is left is noise: the held-out force residual, {after:.4f} N rms, is {after / noise:.2g} "
+                     f"times the log's noise floor ({noise:.4f} N)")
+    for item in report.get("stand_ins") or []:
+        params = ", ".join(f"{k}={_fmt(v)}" for k, v in item["params"].items())
+        lines.append(f"NOT WRITTEN as physics: {item['effect']} ({params}) stood in for the unexplained residual: "
+                     f"{item['reason']}")
+    if report.get("withheld"):
+        w = report["withheld"]
+        lines.append(f"NOT WRITTEN: the model with {', '.join(w['effects'])} leaves a held-out force gap of "
+                     f"{w['force_rms_N']:.4f} N, not smaller than the nominal model's {w['nominal_force_rms_N']:.4f} N")
     b, a = report["gap_before"], report["gap_after"]
     if b.get("force_rms_N") is not None:
         lines.append(f"held-out force residual RMS: {_number(b['force_rms_N'])} N -> {_number(a['force_rms_N'])} N "
@@ -188,6 +249,18 @@ def format_summary(report: dict[str, Any]) -> str:
             lines.append(f"held-out open-loop prediction RMS: {_number(b['prediction_rms_m'])} m -> "
                          f"{_number(a['prediction_rms_m'])} m "
                          f"({_reduction(b['prediction_rms_m'], a['prediction_rms_m'])} smaller)")
+    flights = report.get("flights") or {}
+    for record in flights.get("conditions") or []:
+        winds = "; ".join(f"{name} wind {_fmt(v['w'])} +- {_fmt(v.get('w_std'))} m/s" for name, v in record.items()
+                          if name != "log" and isinstance(v, dict))
+        if winds:
+            lines.append(f"flight {record['log']}: {winds} (its own condition; the model file is for still air)")
+    for record in flights.get("held_out") or []:
+        lines.append(f"held-out flight {record['log']}: force error {record['force_rms_N']:.4f} N rms with the model "
+                     f"fitted on the other flights ({_fmt(record.get('ratio_to_in_sample'))} times its in-sample "
+                     f"{record['in_sample_force_rms_N']:.4f} N"
+                     + (f"; its own {record['conditions_fitted_on_it']} condition entries fitted on it)"
+                        if record.get("conditions_fitted_on_it") else ")"))
     for case in report.get("undetermined") or []:
         lines.append(f"undetermined {case['effect']}.{case['parameter']} = {_fmt(case['value'])} +- "
                      f"{_fmt(case['std'])}: {case['reason']}; {case['action']}; to determine: {case['manoeuvre']}")
@@ -201,22 +274,63 @@ def format_summary(report: dict[str, Any]) -> str:
         lines.append(f"cannot determine {' / '.join(limit['effects'])}: {limit['reason']}; to determine: "
                      f"{limit['manoeuvre']}")
     if report.get("unexplained"):
-        w = report["unexplained"]["where"]
-        lines.append(f"UNEXPLAINED residual ({report['unexplained']['force_rms_N']:.4f} N RMS) depends on "
-                     f"{w.get('regressor')} in {w.get('range')} {w.get('unit') or ''}"
-                     + (" (beyond the surface: likely a sidecar error, see the warning)"
-                        if w.get("unit") == "m" and w.get("range") and w["range"][1] <= 0 else ""))
+        lines += _unexplained_lines(report["unexplained"])
         shape = report["unexplained"].get("shape")
         if shape:
             points = ", ".join(f"{f:.3g} N at {k:.3g}" for k, f in zip(shape["knots"], shape["force_N_at_knots"]))
-            lines.append(f"  its shape along {shape['direction_world']} (piecewise linear in {shape['regressor']}, "
-                         f"{shape['unit']}): {points}")
+            lines.append(f"  its shape along {shape['direction_world']} over every flown {shape['regressor']} "
+                         f"(piecewise linear, {shape['unit']}): {points}")
     cl = report.get("closed_loop")
     if cl:
         lines.append(cl.get("summary", ""))
     if report.get("model"):
         lines.append(f"model file: {report['model']}")
+        fields = report.get("vehicle_fields") or {}
+        defaulted = sorted(k for k, v in fields.items() if v.startswith("defaulted"))
+        if defaulted:
+            lines.append(f"  its vehicle's {', '.join(defaulted)} are defaults (the paper's vehicle, or 0), not "
+                         "yours: the model file's vehicle_fields says where each came from")
     return "\n".join(lines)
+
+
+def _unexplained_lines(left: dict) -> list[str]:
+    """The UNEXPLAINED lines of the summary: how much is left beyond the noise, and where it lives."""
+    floor = left.get("noise_floor_N")
+    head = f"UNEXPLAINED residual ({left['force_rms_N']:.4f} N RMS"
+    if floor is not None and left.get("times_noise_floor") is not None:
+        head += (f", {left['times_noise_floor']:.2g} times the noise floor of {floor:.4f} N; "
+                 f"{100 * left['share_of_weight']:.2g} % of the weight beyond the noise")
+    head += ")"
+    lives = left.get("lives_in")
+    w = left.get("where") or {}
+    direction = left.get("direction_world")
+    if lives == "time (periodic)":
+        t = left["time"]
+        head += (f" varies in time: periodic at {t['peak_hz']:.3g} Hz, {t['peak_amplitude_N']:.3g} N amplitude along "
+                 f"{direction} ({100 * t['periodic_explained_fraction']:.0f} % of it predicted by a sinusoid at that "
+                 "frequency fitted on the other folds): a periodic gust or another force the flight's state does not "
+                 "explain")
+    elif lives == "time (slow)":
+        t = left["time"]
+        head += (f" varies in time with nothing in the flight's state or position predicting it: "
+                 f"{100 * t['slow_share']:.0f} % of its excess over the noise is below {0.5:g} Hz, along {direction} "
+                 "(a changing wind, gusts)")
+    elif lives == "position":
+        region = left["position"]["region"]
+        head += (f" lives in a region of the flight: {left['position']['along']} in {region['along_m']} m, height in "
+                 f"{region['height_m']} m" + (" (the top of the flight: a surface may end there)"
+                                              if region.get("top_of_flight") else "")
+                 + (" (the bottom of the flight)" if region.get("bottom_of_flight") else ""))
+    elif lives == "everywhere":
+        head += (f" is steady: a force of {left.get('level_N')} N (world) everywhere, what varies is within the noise; "
+                 "no candidate the flight could determine describes it")
+    elif lives == "nowhere in particular":
+        head += " is spread over the flight: no state, place or time period predicts it"
+    else:
+        head += (f" depends on {w.get('regressor')}: it stands out in {w.get('range')} {w.get('unit') or ''}"
+                 + (" (beyond the surface: likely a sidecar error, see the warning)"
+                    if w.get("unit") == "m" and w.get("range") and w["range"][1] <= 0 else ""))
+    return [head]
 
 
 def _number(value: float | None) -> str:

@@ -51,13 +51,14 @@ from wall_env.motor_lag import held_command_response
 from wall_env.scene import Scene
 
 __all__ = ["Segment", "FlightData", "prepare", "step_average_samples", "DEFAULT_WINDOW_S", "DEFAULT_BLOCK_S",
-           "DEFAULT_FOLDS", "STATE_WINDOW_S"]
+           "DEFAULT_FOLDS", "STATE_WINDOW_S", "HAC_WINDOWS"]
 
 DEFAULT_WINDOW_S = 1.0  # s, smoothing window of the differentiator (both sides of Eq. 28 alike)
 DEFAULT_BLOCK_S = 4.0  # s, length of the time blocks dealt to cross-validation folds
 DEFAULT_FOLDS = 5
 START_WINDOW_S = 0.5  # s, smoothing of the state a prediction starts from
 STATE_WINDOW_S = 0.1  # s, smoothing of the position and velocity at which effects are evaluated
+HAC_WINDOWS = 2.0  # smoothing windows of lags over which standard errors sum the scores' correlation
 
 
 def step_average_samples(x: np.ndarray) -> np.ndarray:
@@ -85,11 +86,38 @@ class Segment:
     p_measured: np.ndarray | None = field(repr=False, default=None)  # (n, 3) logged (unsmoothed) position
     p_start: np.ndarray | None = field(repr=False, default=None)  # (n, 3) position for prediction starts (short smoothing)
     v_start: np.ndarray | None = field(repr=False, default=None)  # (n, 3) velocity for prediction starts (short smoothing)
+    v_raw: np.ndarray | None = field(repr=False, default=None)  # (n, 3) logged velocity, unsmoothed
+    a_raw: np.ndarray | None = field(repr=False, default=None)  # (n, 3) logged acceleration, when the log has one
     evaluators: dict = field(default_factory=dict, repr=False)
+    flight: int = 0  # index of its flight among the flights fitted together (their own conditions)
 
     @property
     def n(self) -> int:
         return len(self.t)
+
+    @property
+    def dt(self) -> float:
+        """Median sample period (s)."""
+        return float(np.median(np.diff(self.t)))
+
+    def step_weights(self) -> np.ndarray:
+        """The matched kernel's weights over the steps of a centred window (``K`` of :mod:`discovery.residuals`)."""
+        return self.kernel.interior["step"] if self.kernel.uniform else self.kernel.edge["step"][self.n // 2]
+
+    def effective_samples(self) -> float:
+        """Independent residual values per axis in this segment: ``n sum(w^2)``, ``w`` the kernel's step weights
+        (the smoothing correlates residual values over ``1 / sum(w^2)`` samples)."""
+        return self.n * float(np.sum(self.step_weights() ** 2))
+
+    def hac_lags(self) -> int:
+        """Lags (in fit rows) of a Newey-West sum over this segment: :data:`HAC_WINDOWS` smoothing windows.
+
+        Rows less than a window apart share smoothed samples, so their residuals are correlated up to
+        one window; the sum runs to two for margin (over ten noisy ground-offset logs the rms of
+        error / standard error was 0.91 with one window and 0.78 with three).
+        """
+        rows_per_window = self.kernel.window / max(1, self.kernel.window // 10)
+        return max(1, int(round(HAC_WINDOWS * rows_per_window)))
 
     def evaluator(self, model: AeroModel, rotor_positions_body: np.ndarray) -> ForceEvaluator:
         """A cached :class:`ForceEvaluator` of ``model``'s structure for this segment's scene."""
@@ -128,6 +156,15 @@ class FlightData:
     @property
     def n_samples(self) -> int:
         return sum(s.n for s in self.segments)
+
+    @property
+    def n_flights(self) -> int:
+        """Flights (logs with at least one segment) fitted together."""
+        return max((s.flight for s in self.segments), default=-1) + 1
+
+    def effective_samples(self) -> float:
+        """Independent residual values per axis over every segment (at least 1)."""
+        return max(sum(seg.effective_samples() for seg in self.segments), 1.0)
 
     @property
     def weight(self) -> float:
@@ -245,7 +282,12 @@ def prepare(logs: list[FlightLog], *, window_s: float = DEFAULT_WINDOW_S, order:
             short = LocalPolynomial(t, min(START_WINDOW_S, window_s), order)
             segments.append(Segment(index, log.source, t, states, thrust, log.omega_cmd_body[part], kernel,
                                     log.scene, log.gravity, measured, fold, train, logged, log.p_world[part],
-                                    short.smooth(log.p_world[part]), short.smooth(v_raw)))
+                                    short.smooth(log.p_world[part]), short.smooth(v_raw),
+                                    None if log.a_world is not None else v_raw,
+                                    None if log.a_world is None else log.a_world[part]))
     if not segments:
         raise ValueError("no log has a segment long enough to differentiate")
+    flights = sorted({seg.log_index for seg in segments})
+    for seg in segments:
+        seg.flight = flights.index(seg.log_index)
     return FlightData(segments, vehicle, n_folds, [log.source for log in logs])

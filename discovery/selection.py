@@ -38,7 +38,8 @@ one form per effect, tried in a round only where the plain form improves the mod
 and kept only when their extra parameters are determined. Quadratic
 drag on the air-relative velocity with a fitted steady wind (``quadratic_drag[wind]``)
 looks like a steady force plus drag, so it is tried after the selection in place of
-any chosen subset of :data:`WIND_REPLACES`, and kept where it scores better.
+any chosen subset of :data:`WIND_REPLACES`, and kept where it scores better; the
+backward pass then runs again, since the wind can leave a companion nothing to explain.
 
 Once the effects are chosen, each is given the form that scores best next to all the
 others (:func:`_refine_forms`): the round that chose an effect saw only the effects
@@ -58,15 +59,16 @@ from typing import Any
 import numpy as np
 from scipy.special import chdtri
 
-from discovery.fitting import EffectFit, FitResult, applicable, term_key
+from discovery.fitting import Candidate, Fitter, applicable
+from discovery.layout import ParameterLayout
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG, MotorLag
 from discovery.residuals import FlightData
-from wall_env.effects import Effect, make_effect
+from discovery.thrust_map import make_candidate
+from wall_env.effects import Effect
 
 __all__ = ["ALPHA", "MIN_SHARE", "MIN_WEIGHT_SHARE", "VARIANTS", "Candidate", "Step", "Selection", "effective_samples",
-           "parameter_price", "score",
-           "options_without_parameters",
-           "forward_selection", "fit_only"]
+           "parameter_price", "score", "priced", "make_fitter", "options_without_parameters", "forward_selection",
+           "fit_only"]
 
 ALPHA = 1e-4  # significance a parameter must reach on held-out data
 MIN_SHARE = 0.02  # share of the held-out force-gap energy left without it that an effect must explain
@@ -75,6 +77,7 @@ VARIANTS: dict[str, list[dict]] = {
     "wall_suction": [{"thrust_scaling": True}],
     "ground_effect": [{"distance_offset": True}],
     "ceiling_effect": [{"distance_offset": True}],
+    "thrust_scale": [{"affine": True}],  # an affine thrust map (discovery.thrust_map)
 }
 #: drag in a steady wind looks like a steady force plus drag, so it is tried after selection,
 #: in place of whatever of these the selection chose
@@ -83,11 +86,7 @@ WIND_REPLACES = ("constant_force", "linear_drag", "quadratic_drag")
 
 def effective_samples(data: FlightData) -> float:
     """Independent residual values per axis: ``sum over segments of n sum(w^2)``, ``w`` the kernel's step weights."""
-    total = 0.0
-    for seg in data.segments:
-        weights = seg.kernel.interior["step"] if seg.kernel.uniform else seg.kernel.edge["step"][seg.n // 2]
-        total += seg.n * float(np.sum(weights**2))
-    return max(total, 1.0)
+    return data.effective_samples()
 
 
 def parameter_price(n_eff_per_axis: float, alpha: float = ALPHA) -> float:
@@ -99,22 +98,6 @@ def score(mse_axes: np.ndarray, n_params: int, n_eff_per_axis: float, alpha: flo
     """``3 N ln(sum_a MSE_a) + c p``: lower is better."""
     total = max(float(np.sum(np.asarray(mse_axes, dtype=float))), 1e-300)
     return 3.0 * n_eff_per_axis * math.log(total) + parameter_price(n_eff_per_axis, alpha) * n_params
-
-
-@dataclass
-class Candidate:
-    """One effect set tried: its full-data fit, held-out residual and score."""
-
-    names: list[str]
-    fit: FitResult
-    cv_residual: list[np.ndarray]
-    mse: float  # held-out mean squared residual (vector norm), N^2
-    mse_axes: np.ndarray  # per world axis, N^2
-    score: float
-
-    @property
-    def n_params(self) -> int:
-        return int(self.fit.theta.size)
 
 
 @dataclass
@@ -141,35 +124,32 @@ class Selection:
     forms: list[dict] = field(default_factory=list)  # the form (candidate key) of each chosen effect
     form_limits: list[dict] = field(default_factory=list)  # fuller forms of chosen effects the flight left open
     motor_lag: dict | None = None  # the lag fitted with the chosen effects, when one was looked for (_motor_lag)
+    fitter: Fitter | None = field(default=None, repr=False)  # every fit made, for refits next to the chosen ones
 
 
-def _mse_axes(parts: list[np.ndarray]) -> np.ndarray:
-    return np.mean(np.concatenate(parts) ** 2, axis=0)
+def make_fitter(data: FlightData, r_nom: list[np.ndarray], templates: dict[str, Effect],
+               n_eff: float | None = None) -> Fitter:
+    """The run's :class:`~discovery.fitting.Fitter`, scoring every set by :func:`score` with :func:`priced`."""
+    n = data.effective_samples() if n_eff is None else n_eff
+
+    def scorer(mse_axes: np.ndarray, layout: ParameterLayout, held: np.ndarray) -> float:
+        return score(mse_axes, priced(layout, held), n)
+
+    return Fitter(data, r_nom, templates, scorer)
 
 
-class _Evaluator:
-    """Fits effect sets and caches them by name."""
-
-    def __init__(self, data: FlightData, r_nom: list[np.ndarray], templates: dict[str, Effect], n_eff: float):
-        self.data = data
-        self.r_nom = r_nom
-        self.templates = templates
-        self.n_eff = n_eff
-        self.terms: dict = {}
-        self.cache: dict[tuple[str, ...], Candidate] = {}
-
-    def evaluate(self, names: list[str], previous: dict[str, np.ndarray] | None = None) -> Candidate:
-        """Fit the candidate keys ``names``; ``previous`` holds starting values by key."""
-        key = tuple(names)
-        if key not in self.cache:
-            problem = EffectFit(self.data, [self.templates[n] for n in names], self.r_nom, self.terms)
-            start = {self.templates[n].name: previous[n] for n in names if previous and n in previous}
-            fit = problem.fit(previous=start)
-            cv, _ = problem.cross_validate(fit)
-            axes = _mse_axes(cv)
-            priced = sum(priced_parameters(self.templates[n]) for n in names)
-            self.cache[key] = Candidate(list(names), fit, cv, float(axes.sum()), axes, score(axes, priced, self.n_eff))
-        return self.cache[key]
+def priced(layout: ParameterLayout, held: np.ndarray | None = None) -> int:
+    """Parameters the score prices a set laid out by ``layout`` at: every free packed entry (a flight's own wind
+    counts once per flight), plus each effect's options without parameters; a motor lag counts one
+    (:func:`priced_parameters`); entries ``held`` at a value are not parameters."""
+    held = np.zeros(layout.size, dtype=bool) if held is None or held.size != layout.size else held
+    total = 0
+    for e, effect in enumerate(layout.templates):
+        if isinstance(effect, MotorLag):
+            total += priced_parameters(effect)
+            continue
+        total += int((layout.entries_of(e) & ~held).sum()) + options_without_parameters(effect)
+    return total
 
 
 def priced_parameters(effect: Effect) -> int:
@@ -206,11 +186,6 @@ def _switched_options(effect: Effect) -> list[str]:
     return [k for k, v in effect.option_values.items() if v != type(effect).options.get(k)]
 
 
-def _params_by_name(candidate: Candidate) -> dict[str, np.ndarray]:
-    """Fitted parameter vectors by candidate key."""
-    return {key: e.param_vector() for key, e in zip(candidate.names, candidate.fit.effects)}
-
-
 def variant_key(name: str, options: dict) -> str:
     """The candidate key of a fuller form, e.g. ``quadratic_drag[wind]``."""
     return f"{name}[{','.join(sorted(k for k, v in options.items() if v))}]"
@@ -226,7 +201,7 @@ def _with_variants(templates: dict[str, Effect], variants: dict[str, list[dict]]
         for options in variants.get(name, []):
             if all(template.option_values.get(k) == v for k, v in options.items()):
                 continue
-            out[variant_key(name, options)] = make_effect(name, **{**template.option_values, **options})
+            out[variant_key(name, options)] = make_candidate(name, **{**template.option_values, **options})
     return out
 
 
@@ -239,8 +214,8 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     templates = _with_variants(base, VARIANTS if variants is None else variants)
     n_eff = effective_samples(data)
     price = parameter_price(n_eff)
-    evaluator = _Evaluator(data, r_nom, templates, n_eff)
-    nominal = evaluator.evaluate([])
+    fitter = make_fitter(data, r_nom, templates, n_eff)
+    nominal = fitter.candidate([])
     current = nominal
     steps: list[Step] = []
     alike: list[dict] = []
@@ -266,7 +241,7 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
                 continue  # a fuller form is worth fitting only where its plain form already helps
             if progress is not None:
                 progress(f"trying {' + '.join(current.names + [key])}")
-            cand = evaluator.evaluate(current.names + [key], previous=_params_by_name(current))
+            cand = fitter.candidate(current.names + [key], previous=current.previous())
             gain = 1.0 - cand.mse / current.mse if current.mse > 0 else 0.0
             usable = cand.score < current.score and material(cand, current) and _extra_determined(cand, key)
             tried.append({"name": key, "cv_mse_N2": cand.mse, "gain": gain, "score": cand.score,
@@ -289,25 +264,28 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
                               "explained_alike": round((current.mse - other.mse) / nominal.mse, 4)})
         steps.append(Step(tried, best.names[-1], current.mse, best.mse))
         current = best
-    current, removed = _backward(evaluator, current, material)
-    refined, swaps = _refine_forms(evaluator, current)
+    current, removed = _backward(fitter, current, material)
+    refined, swaps = _refine_forms(fitter, current)
     if swaps:  # another form may leave a companion effect nothing to explain
-        current, dropped = _backward(evaluator, refined, material)
+        current, dropped = _backward(fitter, refined, material)
         removed += dropped
     if "quadratic_drag" in base and variants is None:
-        current, evaluator = _drag_in_wind(data, r_nom, evaluator, current, base["quadratic_drag"], progress)
-    explained = _sequential_explained(evaluator, current, nominal)
+        in_wind = _drag_in_wind(fitter, current, base["quadratic_drag"], progress)
+        if in_wind is not current:  # the wind may leave a companion nothing to explain (a thrust scale of 0.9999)
+            current, dropped = _backward(fitter, in_wind, material)
+            removed += dropped
+    explained = _sequential_explained(fitter, current, nominal)
     explained = {effect_name(k): v for k, v in explained.items()}
     chosen_names = {effect_name(k) for k in current.names}
     alike = [a for a in alike if a["chosen"] in chosen_names]
     forms = [{"effect": effect_name(k), "form": k, **({"chosen_first_as": swaps[k]} if k in swaps else {})}
              for k in current.names]
-    form_limits = _form_limits(evaluator, current)
-    lag = _motor_lag(evaluator, current, nominal, progress) if look_for_lag else None
-    return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms, form_limits, lag)
+    form_limits = _form_limits(fitter, current)
+    lag = _motor_lag(fitter, current, nominal, progress) if look_for_lag else None
+    return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms, form_limits, lag, fitter)
 
 
-def _motor_lag(evaluator: _Evaluator, current: Candidate, nominal: Candidate, progress) -> dict:
+def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, progress) -> dict:
     """A motor lag fitted jointly with the chosen effects (:mod:`discovery.motor_lag`), and whether it counts.
 
     It counts when it lowers the held-out score and its 95 % interval is away from zero and from
@@ -329,15 +307,17 @@ def _motor_lag(evaluator: _Evaluator, current: Candidate, nominal: Candidate, pr
     from discovery.determination import undetermined_cases
 
     scale = [float(e.values["scale"][0]) for e in current.fit.effects if e.name == "thrust_scale"]
-    template = MotorLag(segments=len(evaluator.data.segments), thrust_scale=scale[0] if scale else 1.0)
-    evaluator.templates[LAG_KEY] = template
+    template = MotorLag(segments=len(fitter.data.segments), thrust_scale=scale[0] if scale else 1.0)
+    fitter.add(LAG_KEY, template)
     if progress is not None:
         progress(f"trying {' + '.join(current.names + [LAG_KEY])}")
-    cand = evaluator.evaluate(current.names + [LAG_KEY], previous=_params_by_name(current))
+    cand = fitter.candidate(current.names + [LAG_KEY], previous=current.previous())
     lag, std = cand.fit.effects[-1], cand.fit.std_dicts()[-1]
     tau, tau_std = float(lag.values["time_constant"][0]), float(std["time_constant"])
     cases = [c for c in undetermined_cases([lag], [std]) if c["name"] == "time_constant"]  # start errors: nuisance
-    forces = evaluator.terms[term_key(template)].evaluate(lag.param_vector())[0]
+    assert cand.problem is not None
+    term = cand.problem.terms[-1]
+    forces = [term.at_rows(s, lag.param_vector())[0] for s in range(len(fitter.data.segments))]
     force_rms = float(np.sqrt(np.mean(np.sum(np.concatenate(forces) ** 2, axis=1))))
     if cand.score >= current.score:
         reason = "it does not lower the held-out score"
@@ -359,7 +339,9 @@ def _moves(current: Candidate, with_lag: Candidate) -> dict | None:
     """The chosen effects' parameter entry that the lag moves most, if one moves by more than
     :data:`MOVE_SHARE` of its value and two standard errors: ``{"effect", "parameter", "without", "with"}``."""
     # the chosen effects come first in the lag's fit, packed alike
-    labels = [(e.name, label) for e in current.fit.effects for label in e.param_labels()]
+    layout = current.fit.layout
+    labels = [] if layout is None else [(layout.templates[layout.effect_of(i)].name, label.split(".", 1)[1])
+                                        for i, label in enumerate(layout.labels())]
     without, errors = current.fit.theta, current.fit.param_std
     with_ = with_lag.fit.theta[:without.size]
     best, largest = None, MOVE_SHARE
@@ -370,7 +352,7 @@ def _moves(current: Candidate, with_lag: Candidate) -> dict | None:
     return best
 
 
-def _refine_forms(evaluator: _Evaluator, current: Candidate) -> tuple[Candidate, dict[str, str]]:
+def _refine_forms(fitter: Fitter, current: Candidate) -> tuple[Candidate, dict[str, str]]:
     """Each chosen effect in the form that scores best next to all the others.
 
     A round of forward selection weighs an effect's forms against the model of that round
@@ -387,10 +369,10 @@ def _refine_forms(evaluator: _Evaluator, current: Candidate) -> tuple[Candidate,
     while True:
         best = current
         for key in current.names:
-            for form in (k for k in evaluator.templates if effect_name(k) == effect_name(key) and k != key):
+            for form in (k for k in fitter.templates if effect_name(k) == effect_name(key) and k != key):
                 names = [form if k == key else k for k in current.names]
-                previous = {k: v for k, v in _params_by_name(current).items() if k != key}
-                cand = evaluator.evaluate(names, previous=previous)
+                previous = {k: v for k, v in current.previous().items() if k != key}
+                cand = fitter.candidate(names, previous=previous)
                 if cand.score < best.score and _extra_determined(cand, form):
                     best, swap = cand, (key, form)
         if best is current:
@@ -399,7 +381,7 @@ def _refine_forms(evaluator: _Evaluator, current: Candidate) -> tuple[Candidate,
         current = best
 
 
-def _form_limits(evaluator: _Evaluator, current: Candidate) -> list[dict]:
+def _form_limits(fitter: Fitter, current: Candidate) -> list[dict]:
     """Why each chosen effect kept its plain form where the literature has a fuller one (the ground and
     ceiling effects' distance offset, wall suction scaled by rotor thrust), with the manoeuvre that
     would tell them apart, as
@@ -412,12 +394,12 @@ def _form_limits(evaluator: _Evaluator, current: Candidate) -> list[dict]:
 
     out = []
     for key in current.names:
-        for form in (k for k in evaluator.templates if "[" in k and effect_name(k) == key):
-            effect = evaluator.templates[form]
+        for form in (k for k in fitter.templates if "[" in k and effect_name(k) == key):
+            effect = fitter.templates[form]
             extra = _extra_parameters(effect)
             options = _switched_options(effect)
             names = [form if k == key else k for k in current.names]
-            fuller = evaluator.evaluate(names, previous={k: v for k, v in _params_by_name(current).items() if k != key})
+            fuller = fitter.candidate(names, previous={k: v for k, v in current.previous().items() if k != key})
             index = names.index(form)
             fitted, std = fuller.fit.effects[index], fuller.fit.std_dicts()[index]
             open_ = {c["name"] for c in undetermined_cases([fitted], [std])}
@@ -441,17 +423,14 @@ def _form_limits(evaluator: _Evaluator, current: Candidate) -> list[dict]:
     return out
 
 
-def _drag_in_wind(data: FlightData, r_nom: list[np.ndarray], evaluator: _Evaluator, current: Candidate,
-                  template: Effect, progress) -> tuple[Candidate, _Evaluator]:
-    """Quadratic drag on the air-relative velocity with a fitted wind, in place of any chosen subset of
-    :data:`WIND_REPLACES`, where it scores better and its wind is determined."""
+def _drag_in_wind(fitter: Fitter, current: Candidate, template: Effect, progress) -> Candidate:
+    """Quadratic drag on the air-relative velocity with a fitted wind (each flight's own), in place of any chosen
+    subset of :data:`WIND_REPLACES`, where it scores better and its wind is determined."""
     replaceable = [k for k in current.names if k in WIND_REPLACES]
     if not replaceable:
-        return current, evaluator
+        return current
     key = variant_key("quadratic_drag", {"wind": True})
-    templates = {**evaluator.templates, key: make_effect("quadratic_drag", **{**template.option_values, "wind": True})}
-    trial = _Evaluator(data, r_nom, templates, evaluator.n_eff)
-    trial.terms = evaluator.terms  # the plain effects' terms are shared; the wind form gets its own
+    fitter.add(key, make_candidate("quadratic_drag", **{**template.option_values, "wind": True}))
     best = current
     for size in range(1, len(replaceable) + 1):
         for dropped in _subsets(replaceable, size):
@@ -460,13 +439,13 @@ def _drag_in_wind(data: FlightData, r_nom: list[np.ndarray], evaluator: _Evaluat
             names = [k for k in current.names if k not in dropped] + [key]
             if progress is not None:
                 progress(f"trying {' + '.join(names)}")
-            previous = {k: v for k, v in _params_by_name(current).items() if k in names}
+            previous = {k: v for k, v in current.previous().items() if k in names}
             if "quadratic_drag" in dropped:
-                previous[key] = np.concatenate([_params_by_name(current)["quadratic_drag"], np.zeros(3)])
-            cand = trial.evaluate(names, previous=previous)
+                previous[key] = np.concatenate([current.previous()["quadratic_drag"], np.zeros(3)])
+            cand = fitter.candidate(names, previous=previous)
             if cand.score < best.score and _extra_determined(cand, key):
                 best = cand
-    return (best, trial) if best is not current else (current, evaluator)
+    return best
 
 
 def _subsets(items: list[str], size: int) -> list[tuple[str, ...]]:
@@ -492,7 +471,7 @@ def _extra_determined(candidate: Candidate, key: str) -> bool:
     return sum(1 for c in cases if c["name"] in {p.name for p in extra}) < sum(p.size for p in extra)
 
 
-def _backward(evaluator: _Evaluator, current: Candidate, material) -> tuple[Candidate, list[str]]:
+def _backward(fitter: Fitter, current: Candidate, material) -> tuple[Candidate, list[str]]:
     """Drop what does not pay for itself next to the others, or no longer explains a material share."""
     removed = []
     changed = True
@@ -500,7 +479,7 @@ def _backward(evaluator: _Evaluator, current: Candidate, material) -> tuple[Cand
         changed = False
         for name in list(current.names):
             reduced_names = [n for n in current.names if n != name]
-            reduced = evaluator.evaluate(reduced_names, previous=_params_by_name(current))
+            reduced = fitter.candidate(reduced_names, previous=current.previous())
             if reduced.score <= current.score or not material(current, reduced):
                 current = reduced
                 removed.append(name)
@@ -509,12 +488,12 @@ def _backward(evaluator: _Evaluator, current: Candidate, material) -> tuple[Cand
     return current, removed
 
 
-def _sequential_explained(evaluator: _Evaluator, chosen: Candidate, nominal: Candidate) -> dict[str, float]:
+def _sequential_explained(fitter: Fitter, chosen: Candidate, nominal: Candidate) -> dict[str, float]:
     """Share of the nominal held-out residual energy each effect explains, in the order of addition."""
     out = {}
     previous = nominal
     for i, name in enumerate(chosen.names):
-        step = evaluator.evaluate(chosen.names[: i + 1], previous=_params_by_name(chosen))
+        step = fitter.candidate(chosen.names[: i + 1], previous=chosen.previous())
         out[name] = (previous.mse - step.mse) / nominal.mse if nominal.mse > 0 else 0.0
         previous = step
     return out
@@ -524,11 +503,11 @@ def fit_only(data: FlightData, r_nom: list[np.ndarray], effect: Effect) -> Selec
     """The paper's identification (Sec. 3.4): fit one named effect, without asking whether it pays."""
     if not applicable(effect, data):
         raise ValueError(f"{effect.name} has nothing to act against in these logs' scenes")
-    evaluator = _Evaluator(data, r_nom, {effect.name: effect}, effective_samples(data))
-    nominal = evaluator.evaluate([])
-    chosen = evaluator.evaluate([effect.name])
+    fitter = make_fitter(data, r_nom, {effect.name: effect})
+    nominal = fitter.candidate([])
+    chosen = fitter.candidate([effect.name])
     step = Step([{"name": effect.name, "cv_mse_N2": chosen.mse, "gain": 1.0 - chosen.mse / nominal.mse,
                   "score": chosen.score, "params": chosen.fit.effects[0].params_dict()}], effect.name,
                 nominal.mse, chosen.mse)
     explained = {effect.name: (nominal.mse - chosen.mse) / nominal.mse if nominal.mse > 0 else 0.0}
-    return Selection(chosen, nominal, [step], [], explained, evaluator.n_eff)
+    return Selection(chosen, nominal, [step], [], explained, data.effective_samples(), fitter=fitter)

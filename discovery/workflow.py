@@ -1,4 +1,4 @@
-"""The discovery workflow as one object: ``Discovery().fit(logs)``, then inspect what it found.
+"""The discovery workflow as one estimator: ``Discovery().fit(logs)``, then inspect, ``predict`` and ``score``.
 
 ::
 
@@ -9,28 +9,39 @@
     found.gap_before_, found.gap_after_
     found.model_.save("model.json")   # loads in the env (model=...) and in SC-MPC
     found.report()            # the JSON report as a dict
+    found.predict(read_log("other.csv"))   # the model's aerodynamic force on another flight
+    found.score(read_log("other.csv"))     # the share of the nominal model's force gap it explains there
 
-The five steps:
+One straight pipeline, each step in its own module:
 
-1. **Residuals**: the force residual of paper Eq. 28 at every sample against the
-   nominal model (:mod:`discovery.residuals`) and the open-loop prediction error over a
-   fixed horizon replaying the logged thrust (:mod:`discovery.prediction`).
-2. **Where**: which candidate regressor the residual depends on, where it is large
-   and in which direction (:mod:`discovery.regressors`).
-3. **What**: every effect of the library fitted by least squares and ranked on
-   held-out data, added greedily while it pays for itself (:mod:`discovery.selection`).
-4. **The fix**: a model file, the nominal vehicle plus the named effects with fitted
-   parameters and standard errors (:class:`wall_env.model_file.FlightModel`).
-5. **The proof**: the held-out gaps before and after (``force_rms_N``,
-   ``prediction_rms_m``) and plots (:mod:`discovery.plots`).
+1. **load** the logs (:mod:`discovery.flight_log`);
+2. **segments**: leave out what is not aerodynamic (held up by the ground or a hand, and the
+   rotors spinning up or down on the ground, :mod:`discovery.coverage`) and cut the logs into
+   gap-free segments with their cross-validation folds (:mod:`discovery.residuals`);
+3. **residuals**: the force residual of paper Eq. 28 at every sample against the nominal
+   model (:mod:`discovery.residuals`), and a scene that cannot be right (a rotor behind a
+   wall) corrected (a reversed wall normal) or kept away from the effects that depend on it;
+4. **localise**: which candidate regressor the residual depends on, where it is large
+   and in which direction (:mod:`discovery.regressors`);
+5. **candidates**: the effects of the library (objects; their fuller forms, an affine thrust
+   map, :mod:`discovery.thrust_map`, and a motor lag, :mod:`discovery.motor_lag`, beside them);
+6. **fit** and 7. **select**: every candidate set fitted by least squares and ranked on
+   held-out data, added greedily while it pays for itself (:mod:`discovery.selection`,
+   :mod:`discovery.fitting`, one :class:`~discovery.layout.ParameterLayout` per set, each flight
+   with its own wind); what the flight did not determine is nulled or left out and the rest
+   **fitted again** (:mod:`discovery.determination`); effects that cancel each other are
+   look-alikes and the simplest account is kept (:mod:`discovery.cancelling`); a wall that ends
+   gets its suction fitted on its side of the edge (:mod:`discovery.wall_extent`); a model whose
+   held-out gap is not smaller than the nominal model's is never written;
+8. **report**: the log's noise floor (:mod:`discovery.noise`) and what is left beyond it, with
+   where it lives (:mod:`discovery.unexplained`), kept effects that only stood in for it dropped
+   (:mod:`discovery.standins`), the model file (:class:`wall_env.model_file.FlightModel`), the
+   held-out gaps before and after (``force_rms_N``, ``prediction_rms_m``), each flight held out
+   in turn when several were fitted, plots (:mod:`discovery.plots`) and the JSON report
+   (:mod:`discovery.report`).
 
 All held-out figures use the same cross-validation folds: each time block is predicted
-by parameters fitted without it. A significant residual left after the chosen
-effects (its cross-validated bin means against some regressor predict at least
-``unexplained_threshold`` of it) is reported as ``unexplained`` with where it is and its
-shape: the residual along its mean direction, piecewise linear in the localising
-quantity (:func:`discovery.regressors.piecewise_linear`, plotted by
-:mod:`discovery.plots`).
+by parameters fitted without it. The model written is the model scored.
 """
 
 from __future__ import annotations
@@ -43,20 +54,28 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from discovery.coverage import REST_THRUST_SHARE, flight_limits, resting_on_ground, scene_problems
-from discovery.determination import determined, determining_manoeuvre, restrict
-from discovery.fitting import out_of_fold_residuals
+from discovery.cancelling import cancelling_sets, simpler
+from discovery.cancelling import manoeuvre as cancel_manoeuvre
+from discovery.coverage import CONTACT_HEIGHT, REST_THRUST_SHARE, flight_limits, ground_contact, scene_problems
+from discovery.determination import determining_manoeuvre, refit_determined
+from discovery.fitting import Candidate, EffectFit
 from discovery.flight_log import FlightLog
+from discovery.flights import conditions, model_on, still_air
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG
+from discovery.noise import noise_floor
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
-from discovery.selection import Selection, fit_only, forward_selection
-from wall_env.aero import AeroModel
+from discovery.selection import MIN_WEIGHT_SHARE, Selection, effect_name, fit_only, forward_selection, parameter_price
+from discovery.standins import own_quantity, structure_for, test_effect
+from discovery.thrust_map import ThrustMap, written_effects
+from discovery.unexplained import is_unexplained, where_it_lives
+from discovery.wall_extent import BoundedWall, find_edge, plain_wall
 from wall_env.effects import EFFECTS, Effect, make_effect
 from wall_env.model_file import FlightModel
 
 __all__ = ["Discovery", "DEFAULT_WINDOW_S", "DEFAULT_BLOCK_S"]
+
 
 def _rms(x: np.ndarray) -> float:
     x = np.asarray(x, dtype=float)
@@ -81,12 +100,35 @@ def minimum_duration(window_s: float, horizon_s: float) -> float:
     return max(4.0 * window_s, 2.0 * horizon_s)
 
 
+def _candidate_templates(candidates: list | None, options: dict[str, dict[str, Any]]) -> list[Effect]:
+    """The candidate effects as objects: names (with ``options``) or :class:`~wall_env.effects.Effect` instances."""
+    items = list(EFFECTS) if candidates is None else list(candidates)
+    out: list[Effect] = []
+    for item in items:
+        if isinstance(item, Effect):
+            if item.name not in EFFECTS:
+                raise ValueError(f"candidate {item!r} is not an effect of the library {sorted(EFFECTS)}")
+            out.append(item)
+        elif isinstance(item, str):
+            if item not in EFFECTS:
+                raise ValueError(f"unknown effect(s) {[item]}; the library has {sorted(EFFECTS)}")
+            out.append(make_effect(item, **options.get(item, {})))
+        else:
+            raise ValueError(f"a candidate is an effect name or an Effect instance, got {item!r}")
+    names = [e.name for e in out]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise ValueError(f"each effect may be a candidate once; repeated: {repeated}")
+    return out
+
+
 class Discovery:
     """Find what the nominal model misses in flight logs, name it from the effects library and fit it.
 
     Parameters
     ----------
-    candidates: effect names to consider (default: the whole library).
+    candidates: the effects to consider, as names or :class:`~wall_env.effects.Effect` objects (whose
+        options give the form tried first; default: the whole library).
     effect: fit only this effect, without selection (the paper's identification, Sec. 3.4).
     window_s: smoothing window of the differentiator and of the matched force kernel (s).
     block_s, n_folds: cross-validation time blocks (s) and folds.
@@ -94,7 +136,7 @@ class Discovery:
     max_effects: at most this many effects are added.
     unexplained_threshold: share of the final held-out residual that regressor bin means
         must predict for it to be reported as ``unexplained``.
-    options: effect options for candidates, e.g. ``{"wall_suction": {"thrust_scaling": True}}``.
+    options: effect options for candidates given by name, e.g. ``{"wall_suction": {"thrust_scaling": True}}``.
     motor_lag: look for a motor lag next to the chosen effects when the vehicle block gives no
         ``motor_time_constant`` (:mod:`discovery.motor_lag`); one found becomes the model's
         vehicle ``motor_time_constant`` and the effects are chosen again with it.
@@ -103,8 +145,9 @@ class Discovery:
 
     residual_before_: np.ndarray  # (n, 3) N, the nominal model's held-out force residual
     where_before_: dict  # where that residual is (discovery.regressors.localise_residual)
+    _hold: dict[str, dict[int, float]]  # entries held at their null value, by candidate key
 
-    def __init__(self, candidates: list[str] | None = None, effect: str | None = None, *,
+    def __init__(self, candidates: list[str | Effect] | None = None, effect: str | None = None, *,
                  window_s: float = DEFAULT_WINDOW_S, block_s: float = DEFAULT_BLOCK_S, n_folds: int = 5,
                  horizon_s: float = DEFAULT_HORIZON_S, stride_s: float = DEFAULT_STRIDE_S, max_effects: int = 3,
                  unexplained_threshold: float = 0.15, options: dict[str, dict[str, Any]] | None = None,
@@ -117,11 +160,11 @@ class Discovery:
             raise ValueError(f"n_folds must be an integer in [2, 20], got {n_folds!r}")
         if isinstance(max_effects, bool) or not isinstance(max_effects, (int, np.integer)) or max_effects < 0:
             raise ValueError(f"max_effects must be a non-negative integer, got {max_effects!r}")
-        names = list(EFFECTS) if candidates is None else list(candidates)
-        unknown = sorted(set(names) - set(EFFECTS)) + ([effect] if effect is not None and effect not in EFFECTS else [])
-        if unknown:
-            raise ValueError(f"unknown effect(s) {unknown}; the library has {sorted(EFFECTS)}")
-        self.candidates = names
+        if effect is not None and effect not in EFFECTS:
+            raise ValueError(f"unknown effect(s) {[effect]}; the library has {sorted(EFFECTS)}")
+        self.options = dict(options or {})
+        self._templates = _candidate_templates(candidates, self.options)
+        self.candidates = [e.name for e in self._templates]
         self.effect = effect
         self.window_s = float(window_s)
         self.block_s = float(block_s)
@@ -130,7 +173,6 @@ class Discovery:
         self.stride_s = float(stride_s)
         self.max_effects = int(max_effects)
         self.unexplained_threshold = float(unexplained_threshold)
-        self.options = dict(options or {})
         if not isinstance(motor_lag, bool):
             raise ValueError(f"motor_lag must be True or False, got {motor_lag!r}")
         self.motor_lag = motor_lag
@@ -142,10 +184,10 @@ class Discovery:
             self.progress(text)
 
     def _template(self, name: str) -> Effect:
-        return make_effect(name, **self.options.get(name, {}))
+        return next((e for e in self._templates if e.name == name), None) or make_effect(name, **self.options.get(name, {}))
 
     def fit(self, logs: list[FlightLog] | FlightLog) -> Discovery:
-        """Run the five steps on ``logs``; results land in the attributes ending in ``_``.
+        """Run the pipeline on ``logs``; results land in the attributes ending in ``_``.
 
         BLAS runs on one thread meanwhile: the least-squares matrices have a few thousand rows
         and at most a dozen columns, so threads gain nothing, and on a busy machine their
@@ -157,44 +199,26 @@ class Discovery:
 
     def _fit(self, logs: list[FlightLog] | FlightLog) -> Discovery:
         started = time.perf_counter()
-        logs = [logs] if isinstance(logs, FlightLog) else list(logs)
-        if not logs:
-            raise ValueError("discovery needs at least one flight log")
-        shortest = minimum_duration(self.window_s, self.horizon_s)
-        for log in logs:
-            if log.duration < shortest:
-                raise ValueError(
-                    f"{log.source}: the log lasts {log.duration:.3g} s ({log.n_samples} samples); discovery needs "
-                    f"at least {shortest:.3g} s (4 smoothing windows of window_s = {self.window_s:g} s and 2 "
-                    f"prediction horizons of horizon_s = {self.horizon_s:g} s): record a longer flight or lower "
-                    "window_s / horizon_s (--window, --horizon)")
+        # 1: load
+        logs = self._checked(logs)
         self.logs_ = logs
         self.notes_: list[str] = []
-        airborne = []
-        for log in logs:
-            resting = resting_on_ground(log)
-            if resting.any():
-                dt = float(np.median(np.diff(log.t)))
-                self.notes_.append(
-                    f"{log.source}: {resting.sum() * dt:.1f} s of {log.duration:.1f} s held up by something "
-                    f"else: the thrust carries less than {100 * REST_THRUST_SHARE:.0f} % of the weight and the vehicle "
-                    "does not fall (on the ground or held): "
-                    "left out, that force is not aerodynamic")
-            if (~resting).sum() >= 2 and not resting.all():
-                kept = log.select(~resting)
-                if kept.duration >= shortest:
-                    airborne.append(kept)
+        # 2: segments
+        airborne = self._airborne(logs)
         self._say("preparing residuals")
         try:
             data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
         except ValueError:
             if airborne:
                 raise
-            return self._nothing_to_fit(f"no airborne stretch of at least {shortest:.3g} s: nothing to fit",
-                                        started)
+            shortest = minimum_duration(self.window_s, self.horizon_s)
+            return self._nothing_to_fit(f"no airborne stretch of at least {shortest:.3g} s: nothing to fit", started)
         self.usable_ = True
+        # 3: a scene that cannot be right
+        data, airborne, excluded = self._checked_scene(data, airborne)
+        # 4-7: localise, candidates, fit, select
         look_for_lag = self.motor_lag and self.effect is None and data.vehicle.motor_time_constant == 0
-        r_nom, selection = self._choose(data, look_for_lag)
+        r_nom, selection = self._choose(data, look_for_lag, excluded)
         # the user's nominal model, against which every "before" figure is given
         data_before, nominal_before = data, FlightModel(data.vehicle.to_vehicle_params(), [])
         residual_before, where_before = self.residual_before_, self.where_before_
@@ -206,15 +230,372 @@ class Discovery:
             self._say(f"the thrust lags the log by {1e3 * tau:.3g} ms: choosing the effects again with that lag")
             airborne = [replace(log, vehicle=replace(log.vehicle, motor_time_constant=tau)) for log in airborne]
             data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
-            r_nom, selection = self._choose(data, False)
+            r_nom, selection = self._choose(data, False, excluded)
             selection.motor_lag = lag
             self.residual_before_, self.where_before_ = residual_before, where_before
-        self.motor_lag_ = lag
         self.data_ = data
-        vehicle = data.vehicle.to_vehicle_params()
-        self.notes_ += scene_problems(self.regressors_, data.times)
+        self.notes_ += [p["message"] for p in self.scene_problems_ if not p.get("corrected")]
         self.selection_: Selection | None = selection
         self.limits_ += selection.form_limits
+        self._lag_limits(lag)
+        # what the flight determined, fitted again without the rest; never worse than the nominal model
+        self.noise_ = noise_floor(data)
+        self.stand_ins_: list[dict] = []
+        self.withheld_: dict[str, Any] | None = None
+        final, self._hold, self.undetermined_ = refit_determined(selection.fitter, selection.chosen, self._say)
+        final = self._cancelling(data, final, selection)
+        final = self._never_worse(data, r_nom, self._wall_edge(data, r_nom, final, selection), selection)
+        self._finish(data, r_nom, final, selection)
+        # a kept effect that only stands in for a structure the library cannot describe is not written as physics;
+        # asked only when something is left: a one-parameter effect that leaves nothing but noise is the simpler
+        # account of its residual than any shape-free description (on a sinusoidal flight a thrust scale's force
+        # is also a function of the position)
+        if final.names and self.unexplained_ is not None:
+            kept = self._without_stand_ins(data, r_nom, final, selection)
+            final = self._never_worse(data, r_nom, kept, selection)
+            if final is not kept:
+                self._finish(data, r_nom, final, selection)
+        self.notes_ += self.written_notes_
+        self._wind_limit(data, final)
+        # the proof against the user's nominal model
+        self._say("open-loop predictions")
+        vehicle = data.vehicle.to_vehicle_params()
+        self.prediction_before_ = prediction_pairs(data_before, nominal_before.aero_model(), None, self.horizon_s,
+                                                   self.stride_s)
+        self.prediction_after_ = self._predictions(data, final, vehicle)
+        self.prediction_errors_before_ = np.linalg.norm(self.prediction_before_[1] - self.prediction_before_[2], axis=1)
+        self.prediction_errors_after_ = np.linalg.norm(self.prediction_after_[1] - self.prediction_after_[2], axis=1)
+        self.gap_before_ = {"force_rms_N": _rms(self.residual_before_),
+                            "prediction_rms_m": _rms(self.prediction_errors_before_)}
+        self.gap_after_ = {"force_rms_N": _rms(self.residual_after_),
+                           "prediction_rms_m": _rms(self.prediction_errors_after_)}
+        self.runtime_s_ = time.perf_counter() - started
+        return self
+
+    def _never_worse(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate,
+                     selection: Selection) -> Candidate:
+        """``final``, or the nominal model when ``final``'s held-out force gap is not smaller than the nominal's."""
+        residual_after = data.concat(final.problem.out_of_fold(final.fit.fold_theta, r_nom)) if final.problem \
+            else data.concat(r_nom)
+        if not final.names or _rms(residual_after) < _rms(self.residual_before_) or selection.fitter is None:
+            return final
+        self.withheld_ = {"effects": [e.name for e in final.fit.effects], "force_rms_N": _rms(residual_after),
+                          "nominal_force_rms_N": _rms(self.residual_before_)}
+        self.notes_.append(
+            f"not written: the model with {', '.join(self.withheld_['effects'])} leaves a held-out force gap of "
+            f"{self.withheld_['force_rms_N']:.4g} N, not smaller than the nominal model's "
+            f"{self.withheld_['nominal_force_rms_N']:.4g} N; the model file is the nominal model")
+        lag = selection.motor_lag
+        if lag is not None and lag["kept"]:
+            selection.motor_lag = dict(lag, kept=False, reason="the model with it is not better than the nominal model")
+        return selection.fitter.candidate([])
+
+    def _cancelling(self, data: FlightData, final: Candidate, selection: Selection) -> Candidate:
+        """Kept effects whose forces cancel are look-alikes (:mod:`discovery.cancelling`): reported with the
+        manoeuvre that separates them, and the simplest account the held-out score cannot tell from them kept."""
+        self.cancelling_: list[dict] = []
+        fitter = selection.fitter
+        if fitter is None or final.problem is None or len(final.names) < 2:
+            return final
+        forces = [data.concat(per_segment) for per_segment in final.problem.forces(final.fit.theta)]
+        sets = cancelling_sets([e.name for e in final.fit.effects], forces, MIN_WEIGHT_SHARE * data.weight)
+        for found in sets[:1]:
+            chosen, label = simpler(fitter, final, found, parameter_price(data.effective_samples()), self._hold)
+            record = {"effects": found["effects"], "force_rms_N": found["force_rms_N"], "sum_rms_N": found["sum_rms_N"],
+                      "kept": label, "manoeuvre": cancel_manoeuvre(found["effects"])}
+            self.cancelling_.append(record)
+            self.limits_.append({"effects": found["effects"],
+                                 "reason": f"{', '.join(found['effects'])} cancel each other in this flight (each "
+                                           f"{min(found['force_rms_N']):.3g} N rms or more, together "
+                                           f"{found['sum_rms_N']:.3g} N): the flight cannot tell them apart; "
+                                           f"kept: {label}, the simplest account within one parameter's price of "
+                                           "the best held-out score",
+                                 "manoeuvre": record["manoeuvre"]})
+            if chosen is not final:
+                self._say(f"effects that cancel: kept {label}")
+                final = chosen
+        return final
+
+    def _wind_limit(self, data: FlightData, final: Candidate) -> None:
+        """Drag in a wind from one flight: when the wind is fast against the flight's own speed, the drag is nearly
+        ``C w^2 + 2 C w v`` and a coefficient and a wind speed trade off; flights at several winds tell them apart."""
+        effect = next((e for e in final.fit.effects if e.name == "quadratic_drag" and "w" in e.values), None)
+        if effect is None or data.n_flights > 1:
+            return
+        wind = float(np.linalg.norm(effect.values["w"]))
+        speed = float(np.sqrt(np.mean(np.sum(data.concat([seg.states.v_world for seg in data.segments]) ** 2, axis=1))))
+        if wind > 2.0 * speed:
+            self.limits_.append({
+                "effects": ["quadratic_drag"],
+                "reason": f"the wind ({wind:.3g} m/s) is fast against the flight's own speed ({speed:.2g} m/s rms): "
+                          "the drag is then nearly C w^2 along the wind, and from one flight a drag coefficient and a "
+                          "wind speed trade off (only C w^2 is well determined)",
+                "manoeuvre": "fly the same vehicle at several wind speeds (or in still air too) and give all the logs "
+                             "to one discover: the drag coefficient is shared, each flight has its own wind"})
+
+    def _wall_edge(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate,
+                   selection: Selection) -> Candidate:
+        """Wall suction fitted again on the wall's side of an edge, when the data show one and it scores better by
+        more than a parameter's price (:mod:`discovery.wall_extent`). The edge is looked for again with the
+        suction fitted on its side, until it stays within a centimetre."""
+        self.wall_edge_: dict | None = None
+        fitter = selection.fitter
+        index = next((i for i, e in enumerate(final.fit.effects) if e.name == "wall_suction"), None)
+        if index is None or fitter is None:
+            return final
+        key = final.names[index]
+        options = {k: v for k, v in fitter.templates[key].option_values.items()
+                   if k not in ("axis", "side", "edge_m")}
+        current, edge = final, None
+        for _ in range(3):
+            assert current.problem is not None
+            forces = current.problem.forces(current.fit.theta)
+            others = sum((data.concat(per_segment) for i, per_segment in enumerate(forces) if i != index),
+                         np.zeros((data.n_samples, 3)))
+            # the suction of the whole plane at the current parameters, against what the data show of it
+            wall = plain_wall(current.fit.effects[index])
+            plane = EffectFit(data, [wall], r_nom, fitter.terms, ["plane"])
+            suction = data.concat(plane.forces(wall.param_vector())[0])
+            found = find_edge(data, suction, data.concat(r_nom) - others)
+            if found is None or (edge is not None and (found["axis"], found["side"]) != (edge["axis"], edge["side"])):
+                break
+            if edge is not None and abs(found["edge_m"] - edge["edge_m"]) < 0.01:
+                break
+            edge = found
+            template = BoundedWall(**options, axis=edge["axis"], side=edge["side"], edge_m=float(edge["edge_m"]))
+            bounded_key = f"{effect_name(key)}[edge {edge['axis']} {edge['side']} {edge['edge_m']:.4f}]"
+            fitter.add(bounded_key, template)
+            keys = [bounded_key if k == current.names[index] else k for k in current.names]
+            rename = {current.names[index]: bounded_key}
+            self._say(f"wall suction on one side of an edge: {template.describe()}")
+            current = fitter.candidate(keys, previous={rename.get(k, k): v for k, v in current.previous().items()},
+                                       hold={rename.get(k, k): v for k, v in self._hold.items()})
+            self._hold = {rename.get(k, k): v for k, v in self._hold.items()}
+        if edge is None or current is final:
+            return final
+        if current.score >= final.score - parameter_price(data.effective_samples()):
+            self._hold = {(key if effect_name(k) == "wall_suction" else k): v for k, v in self._hold.items()}
+            return final
+        bounded = fitter.templates[current.names[index]]
+        assert isinstance(bounded, BoundedWall)
+        self.wall_edge_ = {**edge, "description": bounded.describe()}
+        self.notes_.append(
+            f"wall 0 seems to end: where the fitted wall suction acts, the data show {100 * edge['gain_outside']:.0f} % "
+            f"of it beyond the edge and {100 * edge['gain_inside']:.0f} % on the wall's side; {bounded.describe()}. "
+            "Wall suction was fitted on the wall's side only (the held-out score is better by more than a parameter's "
+            "price); the model file's wall_suction acts on the whole plane the scene gives: limit the wall in your "
+            "simulation to where it is")
+        return current
+
+    def _finish(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate, selection: Selection) -> None:
+        """The final model's held-out residual, model file, each effect's force and where it acts, and what is
+        left beyond the noise."""
+        self.final_: Candidate | None = final
+        self.motor_lag_ = selection.motor_lag
+        self.explained_fraction_ = {e.name: selection.explained.get(e.name, 0.0) for e in final.fit.effects}
+        self.residual_after_ = data.concat(final.problem.out_of_fold(final.fit.fold_theta, r_nom)) \
+            if final.problem and final.names else data.concat(r_nom)
+        vehicle = data.vehicle.to_vehicle_params()
+        fitted = list(final.fit.effects)
+        # with several flights, each flight's wind is its own condition (flights_): the effects are for still air
+        self.effects_ = still_air(fitted, data.n_flights)
+        self.param_std_ = final.fit.std_dicts()
+        if data.n_flights > 1:
+            self.param_std_ = [{k: ([float("nan")] * len(v) if k == "w" and isinstance(v, list) else v)
+                                for k, v in std.items()} for std in self.param_std_]
+        written, self.written_notes_ = written_effects([plain_wall(e) for e in self.effects_])
+        lag = selection.motor_lag
+        self.model_ = FlightModel(vehicle, written, _written_std(written, fitted, self.param_std_),
+                                  data.vehicle.vehicle_fields(motor_lag_found=bool(lag and lag["kept"])))
+        self.flights_ = conditions(data, final)
+        self.effect_forces_ = {}
+        self.where_ = {}
+        if final.problem is not None and final.names:
+            for effect, per_segment in zip(fitted, final.problem.forces(final.fit.theta)):
+                force = data.concat(per_segment)
+                self.effect_forces_[effect.name] = force
+                self.where_[effect.name] = describe_force(data, force, self.regressors_)
+        self.unexplained_ = self._unexplained(data)
+
+    def _without_stand_ins(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate,
+                           selection: Selection) -> Candidate:
+        """Drop the kept effects that only stand in for a structure the library cannot describe
+        (:mod:`discovery.standins`), fit the rest again and finish with them; one that acts partly as a proxy
+        becomes a limit.
+
+        Each kept effect is taken out in turn: where the residual then lives (:mod:`discovery.unexplained`) is
+        what the effect was explaining. When that is not the effect's own quantity (a thrust scale explaining a
+        residual that depends on height), the effect is fitted again next to a shape-free description of it."""
+        fitter = selection.fitter
+        if fitter is None:
+            return final
+        changed = False
+        for _ in range(2):  # what is left after dropping stand-ins is asked again
+            found: list[dict] = []
+            for i, key in enumerate(final.names):
+                others = [k for k in final.names if k != key]
+                without = fitter.candidate(others, previous=final.previous(),
+                                           hold={k: v for k, v in self._hold.items() if k in others})
+                residual = data.concat(without.problem.out_of_fold(without.fit.fold_theta, r_nom)) \
+                    if without.problem is not None and others else data.concat(r_nom)
+                if not is_unexplained(_rms(residual), self.noise_, data.weight, MIN_WEIGHT_SHARE):
+                    continue
+                where = where_it_lives(data, residual, self.regressors_, self.noise_, self.unexplained_threshold)
+                if own_quantity(final.fit.effects[i], where):
+                    continue
+                structure = structure_for(data, where, self.regressors_)
+                if structure is None:
+                    continue
+                self._say(f"asking whether {key} only stands in for a residual that {where['lives_in']} describes")
+                standin, proxies = test_effect(fitter, final, i, structure, where,
+                                               parameter_price(data.effective_samples()), self._hold)
+                if standin is not None:
+                    found.append(standin)
+                for proxy in proxies:
+                    self.limits_.append({
+                        "effects": [proxy["effect"]],
+                        "reason": f"{proxy['effect']} {proxy['parameter']} acts partly as a proxy: without it the "
+                                  f"residual {proxy['lives_in']}, and with that described apart it would be "
+                                  f"{proxy['with']:.4g} instead of {proxy['without']:.4g} (+- {proxy['std']:.2g})",
+                        "manoeuvre": "fly where that residual does not, or vary that quantity independently of the "
+                                     "others"})
+            if not found:
+                break
+            changed = True
+            self.stand_ins_ += found
+            dropped = {s["key"] for s in found}
+            keys = [k for k in final.names if k not in dropped]
+            self._say(f"not written as physics (stand-ins): {', '.join(sorted(dropped))}")
+            final = fitter.candidate(keys, previous=final.previous(),
+                                     hold={k: v for k, v in self._hold.items() if k in keys})
+            if not keys:
+                break
+        if changed:
+            self._finish(data, r_nom, final, selection)
+        return final
+
+    def _unexplained(self, data: FlightData) -> dict | None:
+        """What the final model leaves that is more than noise, and where it lives (:mod:`discovery.unexplained`)."""
+        left = localise_residual(data, self.residual_after_, self.regressors_)
+        self.where_after_ = left
+        after = _rms(self.residual_after_)
+        localised = left["regressor"] is not None and left["explained_fraction"] >= self.unexplained_threshold \
+            and left.get("range") is not None
+        above = is_unexplained(after, self.noise_, data.weight, MIN_WEIGHT_SHARE)
+        if not (above or localised):
+            return None
+        where = where_it_lives(data, self.residual_after_, self.regressors_, self.noise_, self.unexplained_threshold)
+        self._where_left = where
+        floor = self.noise_["floor_N"]
+        excess = math.sqrt(max(after**2 - floor**2, 0.0)) if math.isfinite(floor) else after
+        states = where["states"] if where["states"].get("regressor") not in (None, "everywhere") else left
+        return {"force_rms_N": after, "noise_floor_N": floor,
+                "times_noise_floor": after / floor if floor and math.isfinite(floor) else None,
+                "excess_rms_N": excess, "share_of_weight": excess / data.weight, "lives_in": where["lives_in"],
+                "where": _public_where(states),
+                "shape": self._shape(states) if where["lives_in"] == "states" or localised else None,
+                "position": {k: v for k, v in where["position"].items() if k != "cells"},
+                "position_cells": where["position"]["cells"], "time": where["time"], "level_N": where["level_N"],
+                "direction_world": where["direction_world"]}
+
+    # ------------------------------------------------------------------ the steps
+    def _checked(self, logs: list[FlightLog] | FlightLog) -> list[FlightLog]:
+        """Step 1: the logs as a list, each long enough for the smoothing window and the prediction horizon."""
+        logs = [logs] if isinstance(logs, FlightLog) else list(logs)
+        if not logs:
+            raise ValueError("discovery needs at least one flight log")
+        shortest = minimum_duration(self.window_s, self.horizon_s)
+        for log in logs:
+            if log.duration < shortest:
+                raise ValueError(
+                    f"{log.source}: the log lasts {log.duration:.3g} s ({log.n_samples} samples); discovery needs "
+                    f"at least {shortest:.3g} s (4 smoothing windows of window_s = {self.window_s:g} s and 2 "
+                    f"prediction horizons of horizon_s = {self.horizon_s:g} s): record a longer flight or lower "
+                    "window_s / horizon_s (--window, --horizon)")
+        return logs
+
+    def _airborne(self, logs: list[FlightLog]) -> list[FlightLog]:
+        """Step 2: each log without the samples something other than the thrust held up (with a note)."""
+        shortest = minimum_duration(self.window_s, self.horizon_s)
+        airborne = []
+        self.left_out_: list[dict] = []
+        for log in logs:
+            resting, contact = ground_contact(log)
+            dt = float(np.median(np.diff(log.t)))
+            if resting.any():
+                self.notes_.append(
+                    f"{log.source}: {resting.sum() * dt:.1f} s of {log.duration:.1f} s held up by something "
+                    f"else: the thrust carries less than {100 * REST_THRUST_SHARE:.0f} % of the weight and the vehicle "
+                    "does not fall (on the ground or held): "
+                    "left out, that force is not aerodynamic")
+            if contact.any():
+                self.notes_.append(
+                    f"{log.source}: {contact.sum() * dt:.1f} s of rotors spinning up or down on the ground (next to a "
+                    f"rest, no more than {100 * CONTACT_HEIGHT:.0f} cm above the ground the vehicle rested on or took "
+                    "off from, the thrust below the weight): left out, the ground still carries part of the weight")
+            for mask, why in ((resting, "held up"), (contact, "ground contact")):
+                if mask.any():
+                    self.left_out_.append({"log": log.source, "reason": why, "seconds": round(float(mask.sum() * dt), 3),
+                                           "time_intervals": _intervals(log.t, mask)})
+            left_out = resting | contact
+            if (~left_out).sum() >= 2 and not left_out.all():
+                kept = log.select(~left_out)
+                if kept.duration >= shortest:
+                    airborne.append(kept)
+        return airborne
+
+    def _checked_scene(self, data: FlightData, airborne: list[FlightLog]
+                       ) -> tuple[FlightData, list[FlightLog], set[str]]:
+        """Step 3: rotors behind a wall, under the ground or above the ceiling mean the scene is wrong.
+
+        A wall whose normal points into it (most of the flight behind it) is turned round and the logs
+        prepared again, so the wall's effects are fitted on the corrected geometry; for any other
+        impossible surface, the effects that act against it are not fitted at all. The report says which."""
+        problems = scene_problems(regressors(data), data.times)
+        flipped = sorted({p["wall"] for p in problems if p["reversed"]})
+        corrected = []
+        if flipped:
+            fixed = []
+            for log in airborne:
+                walls = tuple(replace(w, normal=(-w.normal[0], -w.normal[1], -w.normal[2])) if k in flipped else w
+                              for k, w in enumerate(log.scene.walls))
+                fixed.append(replace(log, scene=replace(log.scene, walls=walls)))
+            airborne = fixed
+            data = prepare(airborne, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds)
+            for p in problems:
+                if p["reversed"]:
+                    corrected.append({**p, "corrected": True})
+                    self.notes_.append(p["message"] + "; discovery fitted the wall's effects with that normal "
+                                       "flipped (the scene the flight shows); correct the sidecar")
+            problems = scene_problems(regressors(data), data.times)
+        excluded = {e for p in problems if not p.get("corrected") for e in p["effects"]}
+        for effect in sorted(excluded):
+            self.notes_.append(f"{effect} not fitted: it acts against a surface the scene has wrong (see the "
+                               "sidecar warning), and fitted on that geometry it would describe the error")
+        self.scene_problems_ = corrected + problems
+        return data, airborne, excluded
+
+    def _choose(self, data: FlightData, look_for_lag: bool, excluded: set[str] = frozenset()  # type: ignore[assignment]
+                ) -> tuple[list[np.ndarray], Selection]:
+        """Steps 4-7 on prepared data: the nominal residual, where it is, and what explains it."""
+        nominal = FlightModel(data.vehicle.to_vehicle_params(), [])
+        r_nom = data.residuals(nominal.aero_model())
+        self.regressors_ = regressors(data)
+        self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]))
+
+        # 4: residual and where it is
+        self.residual_before_ = data.concat(r_nom)
+        self.where_before_ = localise_residual(data, self.residual_before_, self.regressors_)
+
+        # 5-7: what
+        if self.effect is not None:
+            self._say(f"fitting {self.effect} only")
+            return r_nom, fit_only(data, r_nom, self._template(self.effect))
+        templates = [t for t in self._templates if t.name not in excluded]
+        return r_nom, forward_selection(data, r_nom, templates, self.max_effects, progress=self._say,
+                                        look_for_lag=look_for_lag)
+
+    def _lag_limits(self, lag: dict | None) -> None:
         if lag is not None and not lag["kept"] and lag["reason"].startswith(UNDETERMINED_LAG):
             self.limits_.append({"effects": [LAG_KEY], "reason": f"a motor lag would pay for itself but {lag['reason']}"
                                  " (a lag and a vertical drag look alike on a climb and descent at one pace)",
@@ -228,68 +609,83 @@ class Discovery:
                           f"{move['parameter']} would be {move['with']:.4g} instead of {move['without']:.4g}: the "
                           "flight cannot tell the lag from that effect",
                 "manoeuvre": determining_manoeuvre(LAG_KEY, "time_constant")})
-        chosen = selection.chosen
-        # only what the flight determined goes into the model (discovery.determination)
-        self.effects_, self.param_std_, self.undetermined_ = determined(list(chosen.fit.effects),
-                                                                        chosen.fit.std_dicts())
-        kept_names = {e.name for e in self.effects_}
-        self.explained_fraction_ = {k: v for k, v in selection.explained.items() if k in kept_names}
-        fold_theta = [self._restricted_theta(chosen.fit.effects, theta_k) for theta_k in chosen.fit.fold_theta]
 
-        # 4: the fix
-        self.model_ = FlightModel(vehicle, list(self.effects_),
-                                  {e.name: std for e, std in zip(self.effects_, self.param_std_)})
+    # ------------------------------------------------------------------ a fitted model on other flights
+    def _prepared(self, logs: list[FlightLog] | FlightLog) -> tuple[FlightData, list[int]]:
+        """``logs`` as the fitted model sees them (ground contact left out, the model's motor lag applied), and for
+        each prepared log the index of the log it came from."""
+        if not hasattr(self, "final_") or self.final_ is None:
+            raise RuntimeError("call fit(logs) before predict or score")
+        logs = self._checked(logs)
+        tau = self.model_.vehicle.motor_time_constant
+        kept, origin = [], []
+        for i, log in enumerate(logs):
+            resting, contact = ground_contact(log)
+            if (~(resting | contact)).sum() >= 2:
+                part = log.select(~(resting | contact))
+                kept.append(replace(part, vehicle=replace(part.vehicle, motor_time_constant=tau)) if tau > 0 else part)
+                origin.append(i)
+        if not kept:
+            raise ValueError("the logs hold no airborne flight to predict")
+        return prepare(kept, window_s=self.window_s, block_s=self.block_s, n_folds=self.n_folds), origin
 
-        # 5: the proof, on held-out data
-        self._say("open-loop predictions")
-        self.residual_after_ = data.concat(out_of_fold_residuals(data, self.effects_, fold_theta, r_nom))
-        self.prediction_before_ = prediction_pairs(data_before, nominal_before.aero_model(), None, self.horizon_s,
-                                                   self.stride_s)
-        fold_models = self._fold_theta(fold_theta)
-        self.prediction_after_ = prediction_pairs(data, self.model_.aero_model(), fold_models, self.horizon_s,
-                                                  self.stride_s)
-        self.prediction_errors_before_ = np.linalg.norm(self.prediction_before_[1] - self.prediction_before_[2], axis=1)
-        self.prediction_errors_after_ = np.linalg.norm(self.prediction_after_[1] - self.prediction_after_[2], axis=1)
-        self.gap_before_ = {"force_rms_N": _rms(self.residual_before_),
-                            "prediction_rms_m": _rms(self.prediction_errors_before_)}
-        self.gap_after_ = {"force_rms_N": _rms(self.residual_after_),
-                           "prediction_rms_m": _rms(self.prediction_errors_after_)}
+    def _final_templates(self) -> list[Effect]:
+        assert self.final_ is not None
+        fitter = self.selection_.fitter if self.selection_ is not None else None
+        return [fitter.templates[k] for k in self.final_.names] if fitter else list(self.final_.fit.effects)
 
-        # where each effect acts, and what is left
-        self.effect_forces_ = {}
-        self.where_ = {}
-        for effect in self.effects_:
-            force = data.concat(data.model_force(AeroModel([effect])))
-            self.effect_forces_[effect.name] = force
-            self.where_[effect.name] = describe_force(data, force, self.regressors_)
-        left = localise_residual(data, self.residual_after_, self.regressors_)
-        self.where_after_ = left
-        self.unexplained_ = None
-        if left["regressor"] is not None and left["explained_fraction"] >= self.unexplained_threshold \
-                and left.get("range") is not None:
-            self.unexplained_ = {"force_rms_N": _rms(self.residual_after_), "where": _public_where(left),
-                                 "shape": self._shape(left)}
-        self.runtime_s_ = time.perf_counter() - started
-        return self
+    def predict(self, logs: list[FlightLog] | FlightLog, given: dict[str, dict[str, Any]] | None = None
+                ) -> np.ndarray:
+        """The aerodynamic force (N, world frame, smoothed as the residual is) the fitted model predicts at every
+        sample of ``logs`` (concatenated), NaN where a sample is left out (ground contact, a segment too short).
 
-    def _choose(self, data: FlightData, look_for_lag: bool) -> tuple[list[np.ndarray], Selection]:
-        """Steps 1-3 on prepared data: the nominal residual, where it is, and what explains it."""
-        nominal = FlightModel(data.vehicle.to_vehicle_params(), [])
-        r_nom = data.residuals(nominal.aero_model())
-        self.regressors_ = regressors(data)
-        self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]))
+        The model's shared parameters are used as fitted; a flight's own conditions (a steady wind of
+        ``quadratic_drag`` with wind) are taken from ``given`` (``{"quadratic_drag": {"w": [...]}}``) or, when not
+        given, fitted on the flight itself with everything else held (:attr:`conditions_` says which,
+        :func:`discovery.flights.model_on`)."""
+        logs = [logs] if isinstance(logs, FlightLog) else list(logs)
+        data, origin = self._prepared(logs)
+        assert self.final_ is not None
+        r_nom, residual, self.conditions_ = model_on(data, self.final_, self._final_templates(), given)
+        out = [np.full((log.n_samples, 3), np.nan) for log in logs]
+        for seg, left in zip(data.segments, residual):
+            log = origin[seg.log_index]
+            out[log][np.searchsorted(logs[log].t, seg.t)] = seg.measured_force - left
+        return np.concatenate(out)
 
-        # 1-2: residual and where it is
-        self.residual_before_ = data.concat(r_nom)
-        self.where_before_ = localise_residual(data, self.residual_before_, self.regressors_)
+    def score(self, logs: list[FlightLog] | FlightLog, given: dict[str, dict[str, Any]] | None = None) -> float:
+        """The share of the nominal model's force-gap energy the fitted model explains on ``logs``: 1 for a perfect
+        model, 0 for one no better than the nominal, negative for a worse one (the scikit-learn convention: higher
+        is better). ``given`` as in :meth:`predict`."""
+        data, _ = self._prepared(logs)
+        assert self.final_ is not None
+        r_nom, residual, self.conditions_ = model_on(data, self.final_, self._final_templates(), given)
+        before = float(np.sum(data.concat(r_nom) ** 2))
+        return 1.0 - float(np.sum(data.concat(residual) ** 2)) / before if before > 0 else 0.0
 
-        # 3: what
-        if self.effect is not None:
-            self._say(f"fitting {self.effect} only")
-            return r_nom, fit_only(data, r_nom, self._template(self.effect))
-        templates = [self._template(n) for n in self.candidates]
-        return r_nom, forward_selection(data, r_nom, templates, self.max_effects, progress=self._say,
-                                        look_for_lag=look_for_lag)
+    def _predictions(self, data: FlightData, final: Candidate, vehicle) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Held-out open-loop predictions of the final model: each fold's parameters (each flight's own wind),
+        the library's effects through their model and an affine thrust map on the replayed thrust."""
+        layout = final.fit.layout
+        if not final.names or layout is None:
+            model = FlightModel(vehicle, []).aero_model()
+            return prediction_pairs(data, model, None, self.horizon_s, self.stride_s)
+        # the library's effects as the model file holds them (a wall that ends is the scene's plane there)
+        library = [plain_wall(e) for e in final.fit.effects if not isinstance(e, ThrustMap)]
+        model = FlightModel(vehicle, library).aero_model()
+        fold_theta: dict[int, list[np.ndarray]] = {}
+        thrust_maps: dict[int, list[np.ndarray]] = {}
+        for f in range(data.n_flights):
+            fold_theta[f], thrust_maps[f] = [], []
+            for theta_k in final.fit.fold_theta:
+                effects = layout.effects(theta_k, f)
+                fold_theta[f].append(FlightModel(vehicle, [plain_wall(e) for e in effects
+                                                           if not isinstance(e, ThrustMap)]).aero_model().theta())
+                maps = [e for e in effects if isinstance(e, ThrustMap)]
+                thrust_maps[f].append(maps[0].param_vector() if maps else np.array([1.0, 0.0]))
+        has_map = any(isinstance(e, ThrustMap) for e in final.fit.effects)
+        return prediction_pairs(data, model, fold_theta, self.horizon_s, self.stride_s,
+                                thrust_maps=thrust_maps if has_map else None)
 
     def _shape(self, where: dict) -> dict | None:
         """The unexplained residual along its mean direction, piecewise linear in its localising quantity."""
@@ -311,47 +707,30 @@ class Discovery:
         self.notes_.append(reason)
         vehicle = self.logs_[0].vehicle.to_vehicle_params()
         self.effects_, self.param_std_, self.explained_fraction_, self.undetermined_ = [], [], {}, []
-        self.model_ = FlightModel(vehicle, [])
+        self.model_ = FlightModel(vehicle, [], {}, self.logs_[0].vehicle.vehicle_fields())
         self.selection_ = None
+        self.final_ = None
         self.motor_lag_ = None
+        self.withheld_ = None
+        self.scene_problems_ = []
+        self.flights_ = {"conditions": [], "held_out": []}
         self.limits_ = [{"effects": sorted(EFFECTS), "reason": reason,
                          "manoeuvre": "fly: take off and hover, move along each body axis at 1 m/s or more, and "
                                       "pass close to the walls, ground and ceiling of the scene"}]
         self.where_, self.where_before_, self.where_after_, self.effect_forces_ = {}, {}, {}, {}
         self.unexplained_ = None
+        self.noise_ = {"floor_N": float("nan")}
+        self.stand_ins_, self.written_notes_ = [], []
+        self.wall_edge_ = None
+        self.cancelling_ = []
+        if not hasattr(self, "left_out_"):
+            self.left_out_ = []
         nan = float("nan")
         self.gap_before_ = {"force_rms_N": nan, "prediction_rms_m": nan}
         self.gap_after_ = dict(self.gap_before_)
         self.prediction_errors_before_ = np.zeros(0)
         self.runtime_s_ = time.perf_counter() - started
         return self
-
-    def _restricted_theta(self, effects: list[Effect], theta: np.ndarray) -> np.ndarray:
-        """One fold's parameters of ``effects`` with the same undetermined entries nulled or left out."""
-        fold_effects, index = [], 0
-        for effect in effects:
-            fold_effects.append(effect.with_params(theta[index:index + effect.param_size]))
-            index += effect.param_size
-        kept = restrict(fold_effects, self.undetermined_)
-        return np.concatenate([e.param_vector() for e in kept]) if kept else np.zeros(0)
-
-    def _fold_theta(self, fold_theta: list[np.ndarray]) -> list[np.ndarray] | None:
-        """Per-fold parameters of the full model (nominal drag plus effects) for predictions."""
-        if not fold_theta:
-            return None
-        full = self.model_.aero_model()
-        out = []
-        for theta_k in fold_theta:
-            effects = []
-            index = 0
-            for effect in self.effects_:
-                effects.append(effect.with_params(theta_k[index:index + effect.param_size]))
-                index += effect.param_size
-            fold_model = FlightModel(self.model_.vehicle, effects).aero_model()
-            if fold_model.structure_key != full.structure_key:
-                raise RuntimeError("fold model structure differs from the full model")
-            out.append(fold_model.theta())
-        return out
 
     # ------------------------------------------------------------------ results
     @property
@@ -368,6 +747,22 @@ class Discovery:
         if not hasattr(self, "effects_"):
             return f"Discovery(candidates={self.candidates}, effect={self.effect})"
         return f"Discovery(found={self.names_}, gap_before={self.gap_before_}, gap_after={self.gap_after_})"
+
+
+def _written_std(written: list[Effect], fitted: list[Effect], stds: list[dict]) -> dict[str, dict]:
+    """Standard errors of the written effects' parameters, where a fitted effect of that name has them."""
+    by_name = {e.name: std for e, std in zip(fitted, stds)}
+    return {e.name: {p.name: by_name[e.name][p.name] for p in e.parameters if p.name in by_name[e.name]}
+            for e in written if e.name in by_name}
+
+
+def _intervals(t: np.ndarray, mask: np.ndarray) -> list[list[float]]:
+    """The stretches of ``t`` where ``mask`` holds, as ``[from_s, to_s]``."""
+    out: list[list[float]] = []
+    changes = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    for a, b in zip(changes[::2], changes[1::2]):
+        out.append([round(float(t[a]), 3), round(float(t[b - 1]), 3)])
+    return out
 
 
 def _public_where(where: dict) -> dict:

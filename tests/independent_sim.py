@@ -6,9 +6,16 @@ following their commands with a 30 ms lag), a 1.3 kg vehicle, a white force dist
 measurement noise, and optionally rotors whose thrust follows the command with a first-order
 lag (integrated as a state). The hidden effects are written from the literature forms: wall
 suction per rotor (Yang et al., Eq. 6, 10), quadratic drag on the air-relative velocity in a
-steady wind, linear body drag, a steady force, and a thrust scale (the rotors produce a fixed
-share of the thrust they are commanded, lag and all). The log is written as the flight-log format's CSV and sidecar,
-directly, without the project's writer.
+steady wind, linear body drag, a steady force, a thrust scale (the rotors produce a fixed
+share of the thrust they are commanded, lag and all) and an affine thrust map (a scale and an
+offset), the image-rotor gain near the ground (Cheeseman and Bennett) and under a ceiling with
+Sanchez-Cuevas et al.'s distance offset. Beyond the project's library of effects it flies what
+a researcher's data hold: a wall that ends at some height while the sidecar says an infinite
+plane, a periodic gust and a zero-mean random one (a force that varies in time), a force that
+grows with height, and a take-off from the ground and a landing on it (the vehicle rests on a
+stiff, damped contact while the rotors spin up and down). The log is written as the flight-log
+format's CSV and sidecar, directly, without the project's writer; the sidecar's scene can be
+written wrong (a wall normal pointing into the wall).
 """
 
 from __future__ import annotations
@@ -25,6 +32,15 @@ _ARM = 0.125 / math.sqrt(2.0)
 ROTORS_BODY = np.array([[_ARM, -_ARM, 0.0], [-_ARM, _ARM, 0.0], [_ARM, _ARM, 0.0], [-_ARM, -_ARM, 0.0]])
 _DT = 0.002  # s, integration step
 _RATE_LAG = 0.03  # s, body-rate response
+REST_HEIGHT = 0.06  # m, height of the centre of mass (and the rotors) resting on the ground's landing gear
+_CONTACT_STIFFNESS = 3000.0  # N/m
+_CONTACT_DAMPING = 80.0  # N s/m
+_CONTACT_FRICTION = 20.0  # N s/m, horizontal, while in contact
+CEILING_Z = 2.0  # m, the ceiling's height when a ceiling effect is flown
+#: position-loop gains that beat wall suction's pull (its negative stiffness, 2 k_s for two near rotors, reaches
+#: 14 N/m at k_s = 7 N/m; the default loop's 1.3 kg x 6 /s^2 = 7.8 N/m let the vehicle through the wall, which this
+#: simulator does not stop)
+NEAR_WALL = {"kp": [20.0, 6.0, 12.0], "kd": [8.0, 4.0, 6.0], "ki": [2.0, 1.0, 4.0]}
 
 
 def _R(q: np.ndarray) -> np.ndarray:
@@ -41,28 +57,56 @@ def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
 
 
-def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """World force (N) of ``effects``: ``suction`` (k_s, d_thr) of a wall at x = 0 with normal +x,
-    ``wind_force`` (3,), ``quadratic_drag`` (C (3,), wind (3,)) and ``linear_drag`` (D (3,), body axes)."""
+def _image_gain(radius: float, distance: float, offset: float) -> float:
+    """Thrust in ground (or ceiling) effect over thrust far from it: ``1 / (1 - (rho / 4 (d + k2))^2)``."""
+    d = max(distance + offset, 0.6 * radius)
+    return 1.0 / (1.0 - (radius / (4.0 * d)) ** 2)
+
+
+def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: float = 0.0,
+                 produced: float = 0.0) -> np.ndarray:
+    """World force (N) of ``effects`` besides the thrust map:
+
+    ``suction`` (k_s, d_thr) of a wall at x = 0 with normal +x (``wall_top``: the wall ends at that height, a
+    rotor above it feels nothing); ``wind_force`` (3,); ``gust`` (amplitude (3,), frequency Hz): a periodic
+    force; ``quadratic_drag`` (C (3,), wind (3,)); ``linear_drag`` (D (3,), body axes); ``height_force`` k
+    (N/m): ``-k z`` along world z, growing with height; ``ground`` (radius, offset) and ``ceiling`` (radius,
+    offset): the image-rotor gain of each rotor's share of the ``produced`` thrust near the ground (z = 0)
+    and under the ceiling (z = :data:`CEILING_Z`)."""
     force = np.zeros(3)
     if "suction" in effects:
         k_s, d_thr = effects["suction"]
+        top = effects.get("wall_top", math.inf)
         for rotor in ROTORS_BODY:
-            distance = (p + R @ rotor)[0]
-            force[0] -= k_s * max(0.0, d_thr - max(distance, 0.0))
+            at = p + R @ rotor
+            if at[2] <= top:
+                force[0] -= k_s * max(0.0, d_thr - max(at[0], 0.0))
     if "wind_force" in effects:
         force += np.asarray(effects["wind_force"], dtype=float)
+    if "gust" in effects:
+        amplitude, frequency = effects["gust"]
+        force += np.asarray(amplitude, dtype=float) * math.sin(2 * math.pi * frequency * t)
     if "quadratic_drag" in effects:
         C, wind = (np.asarray(x, dtype=float) for x in effects["quadratic_drag"])
         v_air_body = R.T @ (v - wind)
         force += R @ (-C * np.abs(v_air_body) * v_air_body)
     if "linear_drag" in effects:
         force += R @ (-np.asarray(effects["linear_drag"], dtype=float) * (R.T @ v))
+    if "height_force" in effects:
+        force[2] -= effects["height_force"] * p[2]
+    for key, surface in (("ground", 0.0), ("ceiling", CEILING_Z)):
+        if key in effects:
+            radius, offset = effects[key]
+            extra = 0.0
+            for rotor in ROTORS_BODY:
+                distance = abs((p + R @ rotor)[2] - surface)
+                extra += (_image_gain(radius, distance, offset) - 1.0) * produced / 4.0
+            force += extra * R[:, 2]
     return force
 
 
 def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, disturbance: np.ndarray,
-                motor_lag: float) -> tuple:
+                motor_lag: float, t: float, contact: bool) -> tuple:
     """d/dt of (p, v, q, w, produced thrust) with the thrust and rate command held and a disturbance force (N)."""
     p, v, q, w, produced = state
     R = _R(q / np.linalg.norm(q))
@@ -70,44 +114,120 @@ def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, d
         thrust_dot = (thrust - produced) / motor_lag
     else:
         produced, thrust_dot = thrust, 0.0
-    force = effects.get("thrust_scale", 1.0) * produced * R[:, 2] + hidden_force(effects, p, v, R) + disturbance
+    produced_map = effects.get("thrust_scale", 1.0) * produced + effects.get("thrust_offset", 0.0)
+    force = produced_map * R[:, 2] + hidden_force(effects, p, v, R, t, produced) + disturbance
+    if "turbulence" in effects:
+        force = force + effects["turbulence"](t)
+    if contact and p[2] < REST_HEIGHT:
+        normal = max(0.0, _CONTACT_STIFFNESS * (REST_HEIGHT - p[2]) - _CONTACT_DAMPING * v[2])
+        force = force + np.array([-_CONTACT_FRICTION * v[0], -_CONTACT_FRICTION * v[1], normal])
     return (v, force / MASS - np.array([0, 0, GRAVITY]), 0.5 * _qmul(q, np.array([0.0, *w])), (w_cmd - w) / _RATE_LAG,
             thrust_dot)
 
 
+def turbulence(std, time_constant: float, duration: float, seed: int):
+    """A zero-mean random force (N) varying over ``time_constant`` s (an Ornstein-Uhlenbeck process per axis,
+    stationary standard deviation ``std``), as a function of time; drawn once on a 10 ms grid, interpolated."""
+    rng = np.random.default_rng(seed)
+    step = 0.01
+    n = int(math.ceil(duration / step)) + 2
+    decay = math.exp(-step / time_constant)
+    values = np.zeros((n, 3))
+    values[0] = rng.normal(0.0, 1.0, 3) * std
+    kick = np.asarray(std, dtype=float) * math.sqrt(1.0 - decay**2)
+    for i in range(1, n):
+        values[i] = decay * values[i - 1] + kick * rng.normal(0.0, 1.0, 3)
+    values -= values.mean(axis=0)  # zero mean over the flight
+    grid = np.arange(n) * step
+
+    def force(t: float) -> np.ndarray:
+        return np.array([np.interp(t, grid, values[:, a]) for a in range(3)])
+
+    return force
+
+
+def _smoothstep(x: float) -> float:
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+#: phases of a flight from the ground (s): rotors stopped, spinning up on the ground, climbing to the survey
+IDLE_S, SPIN_UP_S, CLIMB_S = 1.5, 2.0, 3.0
+#: and back: descending to the ground, resting on it with the rotors spinning down, stopped again
+DESCEND_S, SPIN_DOWN_S = 5.0, 2.0
+
+
 def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: float, seed: int,
-        force_noise: float = 0.25, motor_lag: float = 0.0) -> list[tuple]:
+        force_noise: float = 0.25, motor_lag: float = 0.0, takeoff: bool = False,
+        gains: dict | None = None) -> list[tuple]:
     """Track ``centre + amplitude sin(2 pi t / period + phase)``; rows ``(t, p, v, q, w, T_cmd, w_cmd)``
-    at ``rate_hz``, each with the command applied from then on; the rotors lag it by ``motor_lag`` s."""
+    at ``rate_hz``, each with the command applied from then on; the rotors lag it by ``motor_lag`` s.
+    ``gains`` (``kp``, ``kd``, ``ki``, each per world axis) replace the position loop's defaults: near a wall or a
+    ceiling its pull has a negative stiffness the loop must beat.
+
+    With ``takeoff`` the flight starts and ends resting on the ground below the survey's start: the rotors
+    stopped, then spinning up on the ground to 90 % of the weight, a climb to the survey, ``duration`` s of
+    survey, a descent onto the ground, and the rotors spinning down and stopped again."""
     rng = np.random.default_rng(seed)
     centre, amplitude, period = (np.asarray(x, dtype=float) for x in (centre, amplitude, period))
     phase = np.array([0.0, 1.0, 2.0])
     omega_ref = 2 * math.pi / period
+    start_survey = IDLE_S + SPIN_UP_S if takeoff else 0.0
+    end_survey = start_survey + CLIMB_S + duration if takeoff else duration
+    total = end_survey + DESCEND_S + 2.0 + SPIN_DOWN_S + IDLE_S if takeoff else duration
 
-    def reference(t):
+    def survey(t):
         s, c = np.sin(omega_ref * t + phase), np.cos(omega_ref * t + phase)
         return centre + amplitude * s, amplitude * omega_ref * c, -amplitude * omega_ref**2 * s
 
-    p, v = reference(0.0)[0].copy(), np.zeros(3)
+    ground_point = survey(0.0)[0].copy()
+    ground_point[2] = REST_HEIGHT
+
+    def reference(t):
+        if not takeoff:
+            return survey(t)
+        if t < start_survey + CLIMB_S:  # climbing from the ground to the survey's start
+            x = (t - start_survey) / CLIMB_S
+            target = survey(0.0)[0]
+            return ground_point + _smoothstep(x) * (target - ground_point), np.zeros(3), np.zeros(3)
+        if t < end_survey:
+            return survey(t - start_survey - CLIMB_S)
+        x = (t - end_survey) / DESCEND_S  # descending onto the ground (aiming 5 cm into it)
+        last = survey(end_survey - start_survey - CLIMB_S)[0]
+        below = ground_point - np.array([0.0, 0.0, 0.05])
+        return last + _smoothstep(x) * (below - last), np.zeros(3), np.zeros(3)
+
+    p, v = (ground_point.copy() if takeoff else reference(0.0)[0].copy()), np.zeros(3)
     q, w = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3)
     integral = np.zeros(3)
-    kp, kd, ki = np.array([6.0, 6.0, 12.0]), np.array([4.0, 4.0, 6.0]), np.array([1.0, 1.0, 4.0])
+    loop = {"kp": [6.0, 6.0, 12.0], "kd": [4.0, 4.0, 6.0], "ki": [1.0, 1.0, 4.0], **(gains or {})}
+    kp, kd, ki = (np.asarray(loop[k], dtype=float) for k in ("kp", "kd", "ki"))
     every = int(round(1.0 / (rate_hz * _DT)))
-    thrust, w_cmd = MASS * GRAVITY, np.zeros(3)
+    thrust, w_cmd = (0.0 if takeoff else MASS * GRAVITY), np.zeros(3)
     produced = thrust
+    landed_at, landed_thrust = None, 0.0
     rows = []
-    for i in range(int(round(duration / _DT))):
+    for i in range(int(round(total / _DT))):
         t = i * _DT
         if i % every == 0:
-            p_ref, v_ref, a_ref = reference(t)
-            integral += (p_ref - p) * _DT * every
-            f_des = MASS * (a_ref + kp * (p_ref - p) + kd * (v_ref - v) + ki * integral + np.array([0, 0, GRAVITY]))
             R = _R(q)
-            thrust = float(max(0.0, f_des @ R[:, 2]))
-            w_cmd = 8.0 * (R.T @ np.cross(R[:, 2], f_des / np.linalg.norm(f_des)))
-            w_cmd[2] = -2.0 * math.atan2(R[1, 0], R[0, 0])  # yaw held at 0
+            if takeoff and t < start_survey:  # on the ground: stopped, then spinning up
+                thrust = 0.9 * MASS * GRAVITY * max(0.0, (t - IDLE_S) / SPIN_UP_S)
+                w_cmd = -8.0 * np.array([R[2, 1], -R[2, 0], 0.0])
+            elif takeoff and landed_at is not None:  # touched down: spinning down, then stopped
+                thrust = max(0.0, landed_thrust * (1.0 - (t - landed_at) / SPIN_DOWN_S))
+                w_cmd = -8.0 * np.array([R[2, 1], -R[2, 0], 0.0])
+            else:
+                p_ref, v_ref, a_ref = reference(t)
+                integral += (p_ref - p) * _DT * every
+                f_des = MASS * (a_ref + kp * (p_ref - p) + kd * (v_ref - v) + ki * integral + np.array([0, 0, GRAVITY]))
+                thrust = float(max(0.0, f_des @ R[:, 2]))
+                w_cmd = 8.0 * (R.T @ np.cross(R[:, 2], f_des / np.linalg.norm(f_des)))
+                w_cmd[2] = -2.0 * math.atan2(R[1, 0], R[0, 0])  # yaw held at 0
+                if takeoff and t > end_survey + 0.5 * DESCEND_S and p[2] < REST_HEIGHT + 0.003 and abs(v[2]) < 0.05:
+                    landed_at, landed_thrust = t, min(thrust, 0.9 * MASS * GRAVITY)
             rows.append((t, p.copy(), v.copy(), q.copy(), w.copy(), thrust, w_cmd.copy()))
-        inputs = (effects, thrust, w_cmd, rng.normal(0.0, force_noise, 3), motor_lag)
+        inputs = (effects, thrust, w_cmd, rng.normal(0.0, force_noise, 3), motor_lag, t, takeoff)
         state = (p, v, q, w, produced)
         k1 = _derivative(state, *inputs)
         k2 = _derivative(tuple(x + _DT / 2 * k for x, k in zip(state, k1)), *inputs)
@@ -118,8 +238,13 @@ def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: floa
     return rows
 
 
-def write(rows: list[tuple], path: Path, seed: int, wall: bool = True) -> Path:
-    """The rows with measurement noise as ``path`` (CSV) and its sidecar; returns ``path``."""
+def write(rows: list[tuple], path: Path, seed: int, wall: bool = True, *, wall_normal: float = 1.0,
+          ceiling: bool = False) -> Path:
+    """The rows with measurement noise as ``path`` (CSV) and its sidecar; returns ``path``.
+
+    The sidecar's wall is the plane x = 0 with normal ``(wall_normal, 0, 0)`` (+1 is right: the normal points
+    away from the wall, into the flown space; -1 points into the wall, a sidecar error); the ground is z = 0 and
+    the ceiling, with ``ceiling``, z = :data:`CEILING_Z`."""
     rng = np.random.default_rng(seed + 1)
     lines = ["t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz,thrust_cmd,wx_cmd,wy_cmd,wz_cmd"]
     for t, p, v, q, w, thrust, w_cmd in rows:
@@ -128,8 +253,9 @@ def write(rows: list[tuple], path: Path, seed: int, wall: bool = True) -> Path:
                   *(w + rng.normal(0.0, 0.005, 3)), thrust, *w_cmd]
         lines.append(",".join(f"{x:.9g}" for x in values))
     path.write_text("\n".join(lines) + "\n")
-    walls = [{"point": [0.0, 0.0, 0.0], "normal": [1.0, 0.0, 0.0]}] if wall else []
+    walls = [{"point": [0.0, 0.0, 0.0], "normal": [wall_normal, 0.0, 0.0]}] if wall else []
     sidecar = {"vehicle": {"mass": MASS, "rotor_positions": ROTORS_BODY.tolist()},
-               "scene": {"walls": walls, "ground_z": 0.0, "ceiling_z": None}, "gravity": GRAVITY}
+               "scene": {"walls": walls, "ground_z": 0.0, "ceiling_z": CEILING_Z if ceiling else None},
+               "gravity": GRAVITY}
     path.with_suffix(".json").write_text(json.dumps(sidecar))
     return path

@@ -172,6 +172,27 @@ def test_discover_command_reports_the_closed_loop_check(paper_log, tmp_path):
     assert check["duration_s"] == 8.0
     assert {"nominal_mpc", "scmpc_discovered", "wall_normal_rmse_reduction"} <= set(check)
     assert np.isfinite(check["scmpc_discovered"]["wall_normal_rmse"])
+    # the scenario fly wrote beside the log records the log's SHA-256: ground truth
+    assert check["world"] == "the log's own simulated scenario (ground truth)"
+
+
+def test_closed_loop_refuses_another_logs_world_and_does_not_call_a_matching_one_ground_truth(paper_log, tmp_path,
+                                                                                               capsys):
+    """--closed-loop with another log's --scenario ran and called that world ground truth."""
+    other = tmp_path / "survey.csv"
+    fly(None, "pid", "", 3, other, scenario="survey", duration=DURATION_S)
+    assert main(["discover", str(paper_log), "--out", str(tmp_path / "a"), "--closed-loop", "--scenario",
+                 str(scenario_path(other)), "--no-plots", "--quiet"]) == 2
+    error = capsys.readouterr().err
+    assert f"is not the world of {paper_log}" in error and "m rms from its reference path" in error
+    # the same world flown again (another seed, no effects) matches the log's scene, vehicle, rate and path, but it
+    # is not the log's own record
+    again = tmp_path / "again.csv"
+    fly(None, "pid", "", 8, again, scenario="wall-sweep", duration=DURATION_S)
+    assert main(["discover", str(paper_log), "--out", str(tmp_path / "b"), "--closed-loop", "--scenario",
+                 str(scenario_path(again)), "--closed-loop-duration", "2", "--no-plots", "--quiet"]) == 0
+    world = json.loads((tmp_path / "b" / "report.json").read_text())["closed_loop"]["world"]
+    assert "not ground truth" in world
 
 
 # ---------------------------------------------------------------------- rates and runtime

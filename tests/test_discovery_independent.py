@@ -13,7 +13,7 @@ from discovery.motor_lag import MotorLag
 from discovery.residuals import prepare
 from discovery.workflow import Discovery
 from tests.discovery_support import relative_errors
-from tests.independent_sim import fly, write
+from tests.independent_sim import NEAR_WALL, fly, write
 
 
 def _discover(path):
@@ -23,7 +23,7 @@ def _discover(path):
 def test_wall_suction_and_a_steady_wind_from_another_simulator(tmp_path):
     truth = {"suction": (5.5, 0.125), "wind_force": [0.3, -0.3, -0.25]}
     rows = fly(truth, centre=(0.25, 0.0, 1.0), amplitude=(0.09, 0.5, 0.25), period=(7.0, 9.0, 3.0),
-               duration=60.0, rate_hz=100.0, seed=11)
+               duration=60.0, rate_hz=100.0, seed=11, gains=NEAR_WALL)
     found = _discover(write(rows, tmp_path / "wall.csv", seed=11))
     assert sorted(found.names_) == ["constant_force", "wall_suction"]
     fitted = {f.name: f.values for f in found.effects_}

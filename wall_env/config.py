@@ -244,7 +244,12 @@ class EnvConfig:
 
         # ------------------------------------------------------------------ geometry
         lowest = min_standoff(vehicle_params, spec.wall_axis) + spec.closest_approach
-        standoff = check_range("standoff", spec.standoff if standoff is None else standoff, lowest, 5.0)
+        try:
+            standoff = check_range("standoff", spec.standoff if standoff is None else standoff, lowest, 5.0)
+        except ValueError as exc:
+            if model is None:
+                raise
+            raise ValueError(f"{exc}; {flight_model.behind_standoff(spec.wall_axis, spec.closest_approach)}") from None
         altitude = check_range("altitude", spec.altitude if altitude is None else altitude, 0.1, 100.0)
         duration = check_range("duration", spec.duration if duration is None else duration, 0.05, 3600.0)
         if round(duration / control_dt) > MAX_EPISODE_STEPS:

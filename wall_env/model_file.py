@@ -12,6 +12,10 @@ The JSON form, written by model discovery and read by the environments and SC-MP
 
 The vehicle's ``drag`` is the nominal ``linear_drag``; a ``linear_drag`` entry in
 ``effects`` is drag found on top of it, and :meth:`FlightModel.aero_model` adds the two.
+
+An optional ``vehicle_fields`` maps vehicle fields to where their values came from
+(``"given"``, ``"defaulted"``, ``"derived: ..."``, ``"found: ..."``): model discovery writes it,
+since a log gives only some of them, and an impossible setting traced to a field names it.
 """
 
 from __future__ import annotations
@@ -41,6 +45,19 @@ class FlightModel:
     vehicle: VehicleParams = field(default_factory=VehicleParams)
     effects: list[Effect] = field(default_factory=list)
     param_std: dict[str, dict[str, Any]] = field(default_factory=dict)
+    vehicle_fields: dict[str, str] = field(default_factory=dict)  # field -> where its value came from
+
+    def field_source(self, name: str) -> str:
+        """``vehicle.<name>`` and where its value came from, for messages."""
+        return f"vehicle.{name} ({self.vehicle_fields.get(name, 'as written')})"
+
+    def behind_standoff(self, body_axis: int, closest_approach: float) -> str:
+        """The model's vehicle fields that set the lowest stand-off a task allows (``wall_env.tasks.min_standoff``)."""
+        reach = float(np.max(np.abs(self.vehicle.rotor_positions_array[:, body_axis])))
+        return (f"the lowest stand-off is the model's rotor reach along body {'xyz'[body_axis]}, {reach:.3g} m from "
+                f"{self.field_source('rotor_positions')}, plus {self.vehicle.duct_radius:.3g} m of "
+                f"{self.field_source('duct_radius')}, 5 mm and the task's closest approach of {closest_approach:.3g} m: "
+                "pass a larger standoff, or correct those fields in the model file")
 
     def aero_model(self) -> AeroModel:
         """The vehicle's nominal drag plus every effect (extra linear drag added to the nominal)."""
@@ -65,13 +82,20 @@ class FlightModel:
             if effect.name in self.param_std:
                 record["param_std"] = self.param_std[effect.name]
             records.append(record)
-        return {"vehicle": self.vehicle.to_dict(), "effects": records}
+        data: dict[str, Any] = {"vehicle": self.vehicle.to_dict(), "effects": records}
+        if self.vehicle_fields:
+            data["vehicle_fields"] = dict(self.vehicle_fields)
+        return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "model") -> FlightModel:
-        unknown = sorted(set(data) - {"vehicle", "effects"})
+        unknown = sorted(set(data) - {"vehicle", "effects", "vehicle_fields"})
         if unknown:
-            raise ValueError(f"{source}: unknown key(s) {unknown}; a model file has 'vehicle' and 'effects'")
+            raise ValueError(f"{source}: unknown key(s) {unknown}; a model file has 'vehicle', 'effects' and "
+                             "optionally 'vehicle_fields'")
+        fields_given = data.get("vehicle_fields") or {}
+        if not isinstance(fields_given, dict) or not all(isinstance(v, str) for v in fields_given.values()):
+            raise ValueError(f"{source}: 'vehicle_fields' must map vehicle fields to strings, got {fields_given!r}")
         try:
             vehicle = VehicleParams.from_dict(data.get("vehicle") or {})
             records = data.get("effects") or []
@@ -79,7 +103,7 @@ class FlightModel:
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{source}: {exc}") from exc
         stds = {r["name"]: r["param_std"] for r in records if isinstance(r, dict) and "param_std" in r}
-        return cls(vehicle, effects, stds)
+        return cls(vehicle, effects, stds, {str(k): v for k, v in fields_given.items()})
 
     @classmethod
     def load(cls, path: str | Path) -> FlightModel:

@@ -1,0 +1,183 @@
+"""The noise floor of a log, measured from the log itself, and the spectrum of what a model leaves.
+
+The force residual (paper Eq. 28) is the matched smoothing ``K`` of a per-step quantity,
+``r_k = sum_j w_j e_{k+j}`` with ``e_j = m (v_{j+1} - v_j) / dt + m g e3 - T_j z_j - F_j``
+(:mod:`discovery.differentiation`, :mod:`discovery.residuals`). Aerodynamic effects and
+manoeuvres live below a few hertz; above :data:`BAND_HZ` the per-step quantity is what the
+sensors and the unlogged disturbances add. Its spectrum there is fitted, per world axis,
+with two kinds of noise: white (a force or thrust disturbance, attitude noise) and
+differenced white (velocity measurement noise differentiated), ``S(nu) = A + B 2 (1 -
+cos 2 pi nu)`` (two-sided, per cycle per step). The same two kinds pass the smoothing
+kernel as ``A sum w^2 + B sum (w_j - w_{j+1})^2``: that is the **noise floor**, the rms
+force residual a perfect model would leave on held-out data (:func:`noise_floor`).
+
+A residual within about the floor is noise; one well above it is a force the model does
+not describe, and :func:`residual_spectrum` says where it lives in time: the excess of its
+power spectrum over the noise's, its peak (a periodic gust) and how much of the excess lies
+below :data:`SLOW_HZ` (a wind that changes over seconds).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import nnls
+
+from discovery.residuals import FlightData, Segment, step_average_samples
+
+__all__ = ["BAND_HZ", "SLOW_HZ", "FLOOR_FACTOR", "step_residual", "noise_floor", "residual_spectrum"]
+
+BAND_HZ = 2.0  # Hz: above this the per-step residual is noise (manoeuvres and effects live below ~1 Hz)
+SLOW_HZ = 0.5  # Hz: a residual varying below this varies over seconds (a changing wind, a gust)
+#: a held-out residual more than this many times the noise floor (rms) is more than noise
+FLOOR_FACTOR = 1.5
+_WELCH_S = 2.56  # s per Welch segment of the per-step residual (0.4 Hz resolution)
+_SPECTRUM_S = 20.0  # s per Welch segment of the smoothed residual (0.05 Hz resolution)
+
+
+def step_residual(seg: Segment) -> np.ndarray:
+    """The per-step quantity ``e`` ``(n - 1, 3)`` whose matched smoothing is the segment's measured force."""
+    dt = np.diff(seg.t)
+    mass = seg.states.mass
+    z_steps = step_average_samples(seg.states.R_body_to_world[:, :, 2])
+    if seg.a_raw is not None:  # a measured acceleration: its step average
+        acceleration = mass * step_average_samples(seg.a_raw)
+    else:
+        assert seg.v_raw is not None, "a segment keeps its logged velocity or acceleration"
+        acceleration = mass * np.diff(seg.v_raw, axis=0) / dt[:, None]
+    return acceleration + mass * seg.gravity * np.array([0.0, 0.0, 1.0]) - seg.thrust[:-1, None] * z_steps
+
+
+def _welch(x: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two-sided power per cycle per step of the columns of ``x`` ``(n, d)`` at ``length // 2 + 1`` frequencies
+    (Hann-windowed, half-overlapping segments): ``(nu, (f, d))``; a mean over ``nu`` equals the variance."""
+    length = min(length, len(x))
+    window = np.hanning(length)
+    norm = float(np.sum(window**2))
+    starts = range(0, len(x) - length + 1, max(1, length // 2))
+    powers = [np.abs(np.fft.rfft((x[s:s + length] - x[s:s + length].mean(axis=0)) * window[:, None], axis=0)) ** 2
+              / norm for s in starts]
+    return np.fft.rfftfreq(length), np.mean(powers, axis=0)
+
+
+def _fit_levels(nu: np.ndarray, power: np.ndarray, rounds: int = 5) -> np.ndarray:
+    """White and differenced-white levels ``(A, B) >= 0`` of a periodogram, ``S = A + B 2 (1 - cos 2 pi nu)``.
+
+    Least squares weighted by the model itself (Whittle's likelihood, as iteratively reweighted least
+    squares): every bin counts by its relative error, so the white level is set where it shows (the low
+    end of the band) rather than swamped by the differenced noise that grows with frequency."""
+    design = np.column_stack([np.ones(len(nu)), 2.0 * (1.0 - np.cos(2 * np.pi * nu))])
+    top = float(np.max(power)) if len(power) else 0.0
+    if not np.isfinite(top) or top <= 1e-200:  # a noise-free log (synthetic): no noise to fit
+        return np.zeros(2)
+    levels = nnls(design, power)[0]
+    for _ in range(rounds):
+        model = np.maximum(design @ levels, 1e-12 * top)
+        levels = nnls(design / model[:, None], power / model)[0]
+    return levels
+
+
+def _refine_peak(data: FlightData, residual: np.ndarray, peak_hz: float, resolution_hz: float) -> float:
+    """The frequency within one Welch bin of ``peak_hz`` at which a sinusoid (a sine and a cosine per axis, over
+    the whole log) takes most of ``residual``'s energy: a gust's period to a fraction of the Welch resolution,
+    so that a sinusoid fitted on some folds stays in phase on the others."""
+    t = data.times
+    best, best_energy = peak_hz, -1.0
+    for f in np.linspace(max(peak_hz - resolution_hz, resolution_hz / 4), peak_hz + resolution_hz, 41):
+        basis = np.column_stack([np.sin(2 * np.pi * f * t), np.cos(2 * np.pi * f * t)])
+        coefficients, *_ = np.linalg.lstsq(basis, residual, rcond=None)
+        energy = float(np.sum((basis @ coefficients) ** 2))
+        if energy > best_energy:
+            best, best_energy = float(f), energy
+    return best
+
+
+def _kernel_gains(seg: Segment) -> tuple[float, float]:
+    """``sum w^2`` and ``sum (w_j - w_{j+1})^2`` of the segment's interior step weights (zero-padded)."""
+    w = seg.step_weights()
+    padded = np.concatenate([[0.0], w, [0.0]])
+    return float(np.sum(w**2)), float(np.sum(np.diff(padded) ** 2))
+
+
+def noise_floor(data: FlightData) -> dict:
+    """The rms force residual (N) that measurement noise and unlogged disturbances leave after smoothing.
+
+    Returns ``{"floor_N", "floor_axes_N", "white_N2", "differenced_N2", "band_hz"}``: the floor over all three
+    axes (vector norm) and per world axis, and the fitted white and differenced-white levels (N^2 per step,
+    per axis, averaged over segments weighted by their samples). ``floor_N`` is NaN when no segment is long
+    enough or its rate too low to have a band above :data:`BAND_HZ`."""
+    floors, weights, whites, differenced = [], [], [], []
+    for seg in data.segments:
+        dt = seg.dt
+        length = max(64, int(round(_WELCH_S / dt)))
+        if seg.n < length:
+            continue
+        nu, power = _welch(step_residual(seg), length)
+        band = nu >= BAND_HZ * dt
+        if band.sum() < 4:
+            continue
+        levels = np.array([_fit_levels(nu[band], power[band, a]) for a in range(3)])  # (3, 2): A, B per axis
+        sum_w2, sum_dw2 = _kernel_gains(seg)
+        floors.append(levels[:, 0] * sum_w2 + levels[:, 1] * sum_dw2)
+        whites.append(levels[:, 0])
+        differenced.append(levels[:, 1])
+        weights.append(seg.n)
+    if not floors:
+        nan = float("nan")
+        return {"floor_N": nan, "floor_axes_N": [nan] * 3, "white_N2": [nan] * 3, "differenced_N2": [nan] * 3,
+                "band_hz": BAND_HZ}
+    w = np.asarray(weights, dtype=float) / float(np.sum(weights))
+    axes = np.sqrt(np.asarray(floors).T @ w)
+    return {"floor_N": float(np.sqrt(np.sum(axes**2))), "floor_axes_N": [float(a) for a in axes],
+            "white_N2": [float(x) for x in np.asarray(whites).T @ w],
+            "differenced_N2": [float(x) for x in np.asarray(differenced).T @ w], "band_hz": BAND_HZ}
+
+
+def residual_spectrum(data: FlightData, residual: np.ndarray, floor: dict) -> dict | None:
+    """Where in time a smoothed residual ``(N, 3)`` (all segments) has more power than the noise predicts.
+
+    The residual's spectrum (Welch, :data:`_SPECTRUM_S` segments, summed over the axes) less the noise's
+    after the kernel (``|W(f)|^2 S(f)``) is its excess. Returns ``{"peak_hz", "peak_share", "peak_amplitude_N",
+    "slow_share", "excess_rms_N", "resolution_hz"}``: the frequency of the largest excess, the share of the
+    excess within two bins of it, the amplitude of a sinusoid with that power, the share below :data:`SLOW_HZ`
+    and the excess in rms, or None when no segment is long enough."""
+    spectra, weights = [], []
+    start = 0
+    for seg in data.segments:
+        part = residual[start:start + seg.n]
+        start += seg.n
+        dt = seg.dt
+        length = min(int(round(_SPECTRUM_S / dt)), seg.n)
+        if length < 16:
+            continue
+        nu, power = _welch(part, length)
+        noise = np.zeros_like(power)
+        if np.isfinite(floor.get("floor_N", np.nan)):
+            response = np.abs(np.fft.rfft(seg.step_weights(), length)) ** 2
+            shaped = 2.0 * (1.0 - np.cos(2 * np.pi * nu))
+            for a in range(3):
+                noise[:, a] = response * (floor["white_N2"][a] + floor["differenced_N2"][a] * shaped)
+        spectra.append((nu / dt, np.clip(power - noise, 0.0, None).sum(axis=1), dt))
+        weights.append(seg.n)
+    if not spectra:
+        return None
+    # segments of one log share their rate: put every excess on the first segment's frequency grid
+    hz = spectra[0][0]
+    excess = np.zeros_like(hz)
+    for (f, e, _), n in zip(spectra, weights):
+        excess += np.interp(hz, f, e) * n
+    excess /= float(np.sum(weights))
+    total = float(np.sum(excess))
+    if total <= 0:
+        return {"peak_hz": None, "peak_share": 0.0, "peak_amplitude_N": 0.0, "slow_share": 0.0, "excess_rms_N": 0.0,
+                "resolution_hz": float(hz[1] - hz[0])}
+    peak = int(np.argmax(excess[1:]) + 1)
+    near = slice(max(1, peak - 2), peak + 3)
+    bins = len(hz)
+    # each bin's power is a variance share of the residual: mean over the two-sided band = sum over one side / N
+    variance = lambda x: float(x) * 2.0 / (2 * (bins - 1))  # noqa: E731
+    resolution = float(hz[1] - hz[0])
+    refined = _refine_peak(data, residual, float(hz[peak]), resolution)
+    return {"peak_hz": round(refined, 4), "peak_share": round(float(np.sum(excess[near])) / total, 3),
+            "peak_amplitude_N": round(float(np.sqrt(2.0 * variance(np.sum(excess[near])))), 4),
+            "slow_share": round(float(np.sum(excess[hz < SLOW_HZ])) / total, 3),
+            "excess_rms_N": round(float(np.sqrt(variance(total))), 4), "resolution_hz": round(float(hz[1] - hz[0]), 4)}

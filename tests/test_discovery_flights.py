@@ -1,0 +1,111 @@
+"""Many flights, one model; the estimator's fit, predict and score; honest model files."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import wall_env  # noqa: F401  (registers the environments)
+from discovery.flight_log import read_log
+from discovery.layout import ParameterLayout
+from discovery.workflow import Discovery
+from tests.independent_sim import fly, write
+from wall_env.effects import make_effect
+from wall_env.model_file import FlightModel
+from wall_env.vehicle import VehicleParams
+from wall_inspector.cli import main
+
+FAST = {"centre": (1.5, 0.0, 1.0), "amplitude": (2.0, 2.0, 0.4), "period": (5.0, 6.0, 3.0)}
+C = [0.11, 0.09, 0.07]
+WINDS = ([2.0, 0.5, 0.0], [-3.0, 1.5, 0.0], [3.5, -3.0, 0.0], [1.0, 4.0, 0.0])
+
+
+def _wind_flight(tmp_path, i, seed):
+    rows = fly({"quadratic_drag": (C, WINDS[i])}, duration=40.0, rate_hz=100.0, seed=seed, **FAST)
+    return write(rows, tmp_path / f"wind{i}.csv", seed=seed, wall=False)
+
+
+def test_the_layout_gives_each_flight_its_own_wind_and_shares_the_rest():
+    templates = [make_effect("quadratic_drag", wind=True), make_effect("thrust_scale")]
+    layout = ParameterLayout(["quadratic_drag[wind]", "thrust_scale"], templates, n_flights=2)
+    assert layout.size == 3 + 3 * 2 + 1  # C shared, a wind per flight, the scale shared
+    theta = np.arange(layout.size, dtype=float)
+    first, second = layout.split(theta, 0), layout.split(theta, 1)
+    assert first[0][:3].tolist() == second[0][:3].tolist()  # the drag coefficient is shared
+    assert first[0][3:].tolist() != second[0][3:].tolist()  # each flight its own wind
+    assert first[1].tolist() == second[1].tolist()
+    assert layout.flight_entries(1).sum() == 3 and layout.shared_entries().sum() == 4
+    assert "quadratic_drag[wind].w[2]@1" in layout.labels()
+
+
+def test_flights_at_several_winds_determine_the_drag_and_each_wind(tmp_path, capsys):
+    """From one flight at one wind only C w^2 is determined; three flights at three winds fitted together give the
+    shared drag coefficient and each flight's wind; each flight held out is predicted by the model fitted on the
+    others about as well as in-sample, and predict/score carry the model to a fourth flight."""
+    paths = [_wind_flight(tmp_path, i, 311 + i) for i in range(3)]
+    assert main(["discover", *map(str, paths), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert [e["name"] for e in report["effects"]] == ["quadratic_drag"]
+    assert report["effects"][0]["params"]["C"] == pytest.approx(C, rel=0.1)
+    for flight, wind in zip(report["flights"]["conditions"], WINDS):
+        fitted = np.asarray(flight["quadratic_drag"]["w"])
+        assert np.linalg.norm(fitted - wind) < 0.1 * np.linalg.norm(wind)
+    held_out = report["flights"]["held_out"]
+    assert len(held_out) == 3 and all(h["ratio_to_in_sample"] < 1.5 for h in held_out)
+    assert "held-out flight" in out and "its own condition" in out
+    # the model file is for still air: each flight's wind is a condition, in the report
+    model = FlightModel.load(tmp_path / "out" / "model.json")
+    assert model.effect("quadratic_drag").values["w"].tolist() == [0.0, 0.0, 0.0]
+
+    found = Discovery().fit([read_log(p) for p in paths])
+    fourth = read_log(_wind_flight(tmp_path, 3, 314))
+    force = found.predict(fourth)
+    assert force.shape == (fourth.n_samples, 3) and np.isfinite(force).mean() > 0.99
+    assert found.conditions_[0]["quadratic_drag"]["w"] == pytest.approx(WINDS[3], abs=0.3)  # fitted on the flight
+    assert found.score(fourth) > 0.9
+    # with the wind given instead of fitted
+    assert found.score(fourth, given={"quadratic_drag": {"w": WINDS[3]}}) > 0.9
+    assert found.score(fourth, given={"quadratic_drag": {"w": [0.0, 0.0, 0.0]}}) < 0.5
+
+
+def test_candidates_are_effect_objects_and_predict_needs_a_fit(tmp_path):
+    discovery = Discovery(candidates=[make_effect("wall_suction", thrust_scaling=True), "linear_drag"])
+    assert discovery.candidates == ["wall_suction", "linear_drag"]
+    with pytest.raises(RuntimeError, match="call fit"):
+        discovery.predict(read_log(_wind_flight(tmp_path, 0, 315)))
+    with pytest.raises(ValueError, match="unknown effect"):
+        Discovery(candidates=["wall_sucktion"])
+
+
+def test_a_model_file_says_which_vehicle_fields_were_given_and_the_env_names_the_one_behind_a_bad_stand_off(
+        tmp_path):
+    """A 1.5 kg vehicle with rotors 0.17 m out: the model file carried the paper vehicle's duct radius and inertia
+    with no note, and the env said only 'standoff must be in [0.265208, 5], got 0.23'."""
+    rows = fly({}, duration=30.0, rate_hz=50.0, seed=316, **FAST)
+    path = write(rows, tmp_path / "big.csv", seed=316, wall=False)
+    sidecar = json.loads(path.with_suffix(".json").read_text())
+    sidecar["vehicle"] = {"mass": 1.5, "rotor_positions": [[0.17, -0.17, 0], [-0.17, 0.17, 0], [0.17, 0.17, 0],
+                                                           [-0.17, -0.17, 0]]}
+    path.with_suffix(".json").write_text(json.dumps(sidecar))
+    found = Discovery(candidates=["linear_drag"], motor_lag=False).fit(read_log(path))
+    found.model_.save(tmp_path / "model.json")
+    saved = json.loads((tmp_path / "model.json").read_text())
+    fields = saved["vehicle_fields"]
+    assert fields["mass"] == "given" and fields["rotor_positions"] == "given"
+    assert fields["inertia"].startswith("defaulted") and fields["duct_radius"].startswith("defaulted")
+    assert fields["drag"].startswith("defaulted: 0") and fields["arm_length"].startswith("derived")
+    assert saved["vehicle"]["arm_length"] == pytest.approx(0.17 * np.sqrt(2.0))
+    with pytest.raises(ValueError) as error:
+        gym.make("WallInspector/WallHover-v0", model=str(tmp_path / "model.json"))
+    message = str(error.value)
+    assert message.startswith("standoff must be in")
+    assert "vehicle.rotor_positions (given)" in message and "vehicle.duct_radius (defaulted" in message
+    # the key reads back, and a model file without it still loads
+    assert FlightModel.load(tmp_path / "model.json").vehicle_fields == fields
+    assert FlightModel.from_dict({"vehicle": VehicleParams().to_dict(), "effects": []}).vehicle_fields == {}
+    with pytest.raises(ValueError, match="vehicle_fields"):
+        FlightModel.from_dict({"vehicle": {}, "effects": [], "vehicle_fields": ["mass"]})

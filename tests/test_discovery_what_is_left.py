@@ -1,0 +1,182 @@
+"""What discovery says about what its library cannot describe, on logs of the second simulator
+(``tests/independent_sim.py``): the log's own noise floor, a residual that varies in time or with height,
+stand-ins, a wall that ends, a sidecar whose wall normal points into the wall, ground contact and an affine
+thrust map."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from discovery.flight_log import read_log
+from discovery.noise import FLOOR_FACTOR, _fit_levels
+from discovery.report import format_summary
+from discovery.workflow import Discovery
+from tests.discovery_support import relative_errors
+from tests.independent_sim import GRAVITY, MASS, NEAR_WALL, fly, write
+from wall_inspector.cli import main
+
+OPEN = {"centre": (1.5, 0.0, 1.0), "amplitude": (1.0, 1.0, 0.4), "period": (5.0, 6.0, 3.0)}
+WEIGHT = MASS * GRAVITY
+
+
+def _log(tmp_path, name, effects, seed, *, duration=40.0, rate=100.0, flight=OPEN, wall=False, **kwargs):
+    fly_keys = {k: kwargs.pop(k) for k in ("takeoff", "gains") if k in kwargs}
+    rows = fly(effects, duration=duration, rate_hz=rate, seed=seed, **flight, **fly_keys)
+    return write(rows, tmp_path / f"{name}.csv", seed=seed, wall=wall, **kwargs)
+
+
+def test_the_fitted_noise_levels_match_generated_noise():
+    """White noise of variance A plus differenced white noise of variance B: the periodogram fit returns both."""
+    rng = np.random.default_rng(301)
+    a, b = 0.02, 1.5
+    n, length = 200_000, 256
+    x = rng.normal(0.0, np.sqrt(a), n) + np.diff(rng.normal(0.0, np.sqrt(b), n + 1))
+    window = np.hanning(length)
+    segments = [x[s:s + length] * window for s in range(0, n - length, length // 2)]
+    power = np.mean([np.abs(np.fft.rfft(s)) ** 2 for s in segments], axis=0) / np.sum(window**2)
+    nu = np.fft.rfftfreq(length)
+    band = nu >= 0.02
+    levels = _fit_levels(nu[band], power[band])
+    assert levels[0] == pytest.approx(a, rel=0.15)
+    assert levels[1] == pytest.approx(b, rel=0.05)
+
+
+def test_a_clean_log_is_within_its_own_noise_floor(tmp_path):
+    found = Discovery().fit(read_log(_log(tmp_path, "clean", {}, 302)))
+    floor = found.noise_["floor_N"]
+    assert found.names_ == [] and found.unexplained_ is None
+    # the floor is measured from the log's high-frequency residual; a perfect model leaves about that much
+    assert 0.75 < found.gap_after_["force_rms_N"] / floor < 1.25
+    assert "within noise" in format_summary(found.report())
+
+
+def test_a_zero_mean_periodic_gust_is_reported_as_varying_in_time_at_its_frequency(tmp_path, capsys):
+    """A 0.27 Hz gust of 0.4-0.5 N: nothing of the library describes it, and the report no longer says 'within
+    noise' (4-10 % of the weight was left unexplained that way); it names the gust's frequency."""
+    path = _log(tmp_path, "gust", {"gust": ([0.45, -0.35, 0.3], 0.27)}, 303)
+    assert main(["discover", str(path), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["effects"] == []
+    left = report["unexplained"]
+    assert left["times_noise_floor"] > FLOOR_FACTOR and left["share_of_weight"] > 0.03
+    assert left["lives_in"] == "time (periodic)"
+    assert left["time"]["peak_hz"] == pytest.approx(0.27, abs=0.01)
+    assert left["time"]["peak_amplitude_N"] == pytest.approx(np.linalg.norm([0.45, -0.35, 0.3]), rel=0.2)
+    assert "within noise" not in out and "periodic at 0.27 Hz" in out
+
+
+def test_a_gust_on_a_steady_wind_keeps_the_wind_and_names_the_gust(tmp_path):
+    wind = [0.3, -0.25, -0.2]
+    found = Discovery().fit(read_log(_log(tmp_path, "gusty", {"wind_force": wind, "gust": ([0.3, 0.2, 0.0], 0.22)},
+                                          304)))
+    assert found.names_ == ["constant_force"]
+    assert max(relative_errors(found.effects_[0].values, {"F": wind})) < 0.1
+    assert found.unexplained_["lives_in"] == "time (periodic)"
+    assert found.unexplained_["time"]["peak_hz"] == pytest.approx(0.22, abs=0.01)
+
+
+def test_a_force_growing_with_height_is_not_written_as_a_thrust_scale(tmp_path):
+    """-0.8 N per metre of height on a climb and descent: the thrust falls as the vehicle rises, so a thrust scale
+    (and a steady force, its mean) stand in for it; next to a shape-free function of height they lose on held-out
+    data and are named as stand-ins, not written. What is left depends on height, with its shape."""
+    tall = {"centre": (1.5, 0.0, 1.2), "amplitude": (1.0, 1.0, 0.5), "period": (5.0, 6.0, 6.0)}
+    found = Discovery().fit(read_log(_log(tmp_path, "height", {"height_force": 0.8}, 305, flight=tall, duration=60.0)))
+    assert found.names_ == [] and found.model_.effects == []
+    assert {s["effect"] for s in found.stand_ins_} & {"thrust_scale", "constant_force"}
+    left = found.unexplained_
+    assert left["lives_in"] == "states" and left["where"]["regressor"] == "height above ground"
+    shape = left["shape"]
+    slope = (shape["force_N_at_knots"][-1] - shape["force_N_at_knots"][0]) / (shape["knots"][-1] - shape["knots"][0])
+    assert slope * np.sign(shape["direction_world"][2]) == pytest.approx(-0.8, rel=0.2)
+
+
+def test_a_wall_that_ends_is_found_and_the_suction_fitted_on_the_wall(tmp_path):
+    """The scene says an infinite plane; the wall ends 1.2 m up and the flight goes above it. As a plane, k_s came out
+    45 % high; fitted on the wall's side of the edge the data show, both parameters are within 10 %."""
+    flight = {"centre": (0.25, 0.0, 1.2), "amplitude": (0.09, 0.5, 0.45), "period": (7.0, 9.0, 5.0)}
+    truth = {"k_s": 5.5, "d_thr": 0.125}
+    path = _log(tmp_path, "edge", {"suction": (5.5, 0.125), "wall_top": 1.2}, 306, flight=flight, wall=True,
+                duration=60.0, gains=NEAR_WALL)
+    found = Discovery().fit(read_log(path))
+    assert found.names_ == ["wall_suction"]
+    assert max(relative_errors(found.effects_[0].values, truth)) < 0.1
+    assert found.wall_edge_["axis"] == "height" and found.wall_edge_["side"] == "below"
+    assert found.wall_edge_["edge_m"] == pytest.approx(1.2, abs=0.05)
+    assert any("wall 0 seems to end" in note for note in found.notes_)
+    # the model file holds the library's wall suction (the scene's plane), with those parameters
+    assert found.model_.to_dict()["effects"][0]["options"] == {"thrust_scaling": False}
+
+
+def test_a_wall_normal_pointing_into_the_wall_is_turned_round_and_the_suction_fitted(tmp_path):
+    """The warning said to flip the normal, but a thrust scale and a +6.9 N steady force were written; now the
+    wall's effects are fitted with the normal the flight shows, and the model is never worse than the nominal."""
+    flight = {"centre": (0.25, 0.0, 1.0), "amplitude": (0.09, 0.5, 0.25), "period": (7.0, 9.0, 3.0)}
+    path = _log(tmp_path, "reversed", {"suction": (5.5, 0.125)}, 307, flight=flight, wall=True, wall_normal=-1.0,
+                gains=NEAR_WALL)
+    found = Discovery().fit(read_log(path))
+    assert found.names_ == ["wall_suction"]
+    assert max(relative_errors(found.effects_[0].values, {"k_s": 5.5, "d_thr": 0.125})) < 0.1
+    note = next(n for n in found.notes_ if "flip the sign of scene.walls[0].normal" in n)
+    assert "fitted the wall's effects with that normal flipped" in note
+    assert found.gap_after_["force_rms_N"] < 0.2 * found.gap_before_["force_rms_N"]
+
+
+def test_a_wall_behind_the_vehicle_keeps_its_effects_out_of_the_fit(tmp_path):
+    """A wall point 0.3 m off: part of the flight is behind the wall, which no flight can be; wall suction is not
+    fitted on that geometry, and what is written is not worse than the nominal model."""
+    flight = {"centre": (0.25, 0.0, 1.0), "amplitude": (0.09, 0.5, 0.25), "period": (7.0, 9.0, 3.0)}
+    path = _log(tmp_path, "shifted", {"suction": (5.5, 0.125)}, 308, flight=flight, wall=True, gains=NEAR_WALL)
+    sidecar = json.loads(path.with_suffix(".json").read_text())
+    sidecar["scene"]["walls"][0]["point"] = [0.3, 0.0, 0.0]
+    path.with_suffix(".json").write_text(json.dumps(sidecar))
+    found = Discovery().fit(read_log(path))
+    assert "wall_suction" not in found.names_
+    assert any(n.startswith("wall_suction not fitted") for n in found.notes_)
+    assert found.gap_after_["force_rms_N"] <= found.gap_before_["force_rms_N"]
+
+
+def test_take_off_and_landing_on_the_ground_are_left_out(tmp_path):
+    """Spin-up on the ground and touchdown (thrust 50-100 % of the weight, the ground carrying the rest) passed the
+    held-up filter and came out as aerodynamics; they are left out, and the drag flown is all that is named."""
+    drag = [0.2, 0.25, 0.35]
+    found = Discovery().fit(read_log(_log(tmp_path, "ground", {"linear_drag": drag}, 309, takeoff=True, rate=50.0)))
+    assert found.names_ == ["linear_drag"]
+    assert max(relative_errors(found.effects_[0].values, {"D": drag})) < 0.1
+    contact = [r for r in found.left_out_ if r["reason"] == "ground contact"]
+    assert contact and 0.5 < sum(r["seconds"] for r in contact) < 5.0
+    assert found.unexplained_ is None
+
+
+def test_an_affine_thrust_map_is_one_candidate(tmp_path):
+    """The rotors produce 0.9 x command - 1.2 N: one candidate of two parameters, not a thrust scale beside a steady
+    force; the model file writes it as the library's thrust scale and a vertical steady force, and says so."""
+    found = Discovery().fit(read_log(_log(tmp_path, "map", {"thrust_scale": 0.9, "thrust_offset": -1.2}, 310)))
+    assert found.names_ == ["thrust_scale"]
+    assert max(relative_errors(found.effects_[0].values, {"scale": 0.9, "offset": -1.2})) < 0.1
+    written = {e.name: e for e in found.model_.effects}
+    assert set(written) == {"thrust_scale", "constant_force"}
+    assert written["constant_force"].values["F"] == pytest.approx([0.0, 0.0, found.effects_[0].values["offset"][0]])
+    assert any("affine thrust map is written" in note for note in found.notes_)
+
+
+def test_effects_that_cancel_near_hover_are_reported_as_look_alikes(tmp_path):
+    """A thrust 20 % strong and a 2.55 N downward force cancel at hover (20 % of the 12.75 N weight). Both are there,
+    and the brisk flight tells them apart (its tilt separates a world-vertical force from the body-z thrust), so
+    both are kept; the report names them as effects that cancel, with the manoeuvre that separates them."""
+    effects = {"thrust_scale": 1.2, "wind_force": [0.0, 0.0, -0.2 * WEIGHT]}
+    found = Discovery().fit(read_log(_log(tmp_path, "cancel", effects, 311)))
+    assert sorted(found.names_) == ["constant_force", "thrust_scale"]
+    fitted = {e.name: e.values for e in found.effects_}
+    assert fitted["thrust_scale"]["scale"][0] == pytest.approx(1.2, rel=0.02)
+    assert fitted["constant_force"]["F"][2] == pytest.approx(-0.2 * WEIGHT, rel=0.05)
+    record = found.cancelling_[0]
+    assert sorted(record["effects"]) == ["constant_force", "thrust_scale"]
+    assert record["sum_rms_N"] < 0.3 * max(record["force_rms_N"])
+    assert "climb and descend" in record["manoeuvre"]
+    limit = next(x for x in found.limits_ if sorted(x["effects"]) == ["constant_force", "thrust_scale"]
+                 and "cancel each other" in x["reason"])
+    assert "kept: the kept effects" in limit["reason"]
