@@ -81,6 +81,9 @@ def _fly_both(env_id, seeds, steps, action_fn, **kwargs):
     ("WallInspector/WallHover-v0", {"terminate_on_collision": False, "max_tracking_error": 5.0,
                                     "randomize": {"k_s": (2.0, 8.0), "mass": (0.9, 1.1), "standoff": (0.13, 0.2)}}),
     ("WallInspector/Corridor-v0", {"terminate_on_collision": True, "randomize": {"standoff": (0.17, 0.25)}}),
+    ("WallInspector/Facade-v0", {"terminate_on_collision": False, "max_tracking_error": 5.0,
+                                 "randomize": {"k_s": (2.0, 8.0), "d_thr": (0.1, 0.2), "standoff": (0.14, 0.2)}}),
+    ("WallInspector/Pier-v0", {"terminate_on_collision": True, "randomize": {"mass": (0.9, 1.1)}}),
 ])
 def test_batched_and_single_envs_fly_the_same_trajectories_and_contacts(env_id, kwargs):
     def toward_wall(rng, t, n):  # roll/pitch about at random with a bias that drives the vehicles into walls
