@@ -263,6 +263,19 @@ class SurfaceQuery:
         out[:] = slots.reshape(n, -1)
         return result
 
+    def rotor_surfaces_at(self, p_world: np.ndarray, R_body_to_world: np.ndarray) -> np.ndarray:
+        """:meth:`rotor_surfaces` for poses given by rotation matrices ``(n, 3, 3)``: the local surfaces
+        ``(n, 4 * SURFACE_SLOTS * SURFACE_SIZE)``."""
+        p_world = np.asarray(p_world, dtype=float)
+        out = np.tile(NO_SURFACE, (len(p_world), ROTOR_COUNT * SURFACE_SLOTS))
+        finite = np.all(np.isfinite(p_world), axis=1) & np.all(np.isfinite(R_body_to_world), axis=(1, 2))
+        if finite.any():  # a pose that is not finite feels nothing
+            q = Rotation.from_matrix(R_body_to_world[finite]).as_quat()[:, [3, 0, 1, 2]]  # w, x, y, z
+            found = np.empty((int(finite.sum()), out.shape[1]))
+            self.rotor_surfaces(p_world[finite], q, found)
+            out[finite] = found
+        return out
+
     # ------------------------------------------------------------------ points
     def nearest(self, points_world: np.ndarray, reach: float | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
