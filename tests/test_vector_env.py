@@ -265,10 +265,14 @@ def test_bench_env_batched_writes_its_table_json_and_plot(tmp_path):
 
     files = {kind: tmp_path / f"bench.{kind}" for kind in ("md", "json", "png")}
     code = main(["bench-env", "--batched", "--steps", "200", "--sizes", "1", "8", "--batched-steps", "200",
-                 "--two-core-n", "0", "--memory-resets", "3", "--markdown", str(files["md"]),
+                 "--two-core-n", "0", "--memory-resets", "3", "--geometry-n", "4", "--markdown", str(files["md"]),
                  "--json", str(files["json"]), "--plot", str(files["png"])])
     assert code == 0
     payload = json.loads(files["json"].read_text())
+    assert [r["env_id"] for r in payload["geometry"]] == ["WallInspector/WallSweep-v0", "WallInspector/Facade-v0",
+                                                          "WallInspector/Pier-v0"]
+    assert all(r["n"] == 4 and r["steps_per_s"] > 0 for r in payload["geometry"])
+    assert "| `WallInspector/Facade-v0` |" in files["md"].read_text()
     assert [r["n"] for r in payload["batched"]] == [1, 8]
     assert all(r["steps_per_s"] > 0 and r["env_steps"] >= 200 for r in payload["batched"])
     assert payload["batched"][1]["ratio_to_single"] == pytest.approx(
