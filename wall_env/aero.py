@@ -108,8 +108,13 @@ class AeroModel:
         rotor_thrusts[4], mass, theta[param_size], scene[scene.vector_size])
         -> (force_world[3], moment_body[3], effect_forces_world[3 x n_effects])``
         """
+        return self.structure_function(rotor_positions_body, scene.structure, gravity)
+
+    def structure_function(self, rotor_positions_body: np.ndarray, scene_structure: tuple,
+                           gravity: float = GRAVITY) -> ca.Function:
+        """:meth:`function` for a scene structure (:class:`~wall_env.scene.SceneStructure`) instead of a scene."""
         rotors = tuple(map(tuple, np.asarray(rotor_positions_body, dtype=float)))
-        return _wrench_function(self.structure_key, rotors, scene.structure, float(gravity))
+        return _wrench_function(self.structure_key, rotors, tuple(scene_structure), float(gravity))
 
 
 def symbolic_scene(structure: tuple) -> tuple[SceneSymbols, ca.SX]:
