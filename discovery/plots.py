@@ -13,6 +13,9 @@ open-loop predictions against measurements.
 ``prediction.png``
     logged against predicted displacement over the prediction horizon, per world axis,
     for the nominal and the discovered model.
+``residual_on_surface.png``
+    with walls or bodies in the scene: the held-out residual toward the surface on a map of
+    the surface, position along it against height (:mod:`discovery.surface_map`).
 """
 
 from __future__ import annotations
@@ -162,5 +165,9 @@ def plot_all(found, out_dir: str | Path) -> list[Path]:
         path = out / "unexplained_shape.png"
         fig.savefig(path, dpi=110)
         written.append(path)
+    from discovery.surface_map import plot_surface_map
 
+    surface = plot_surface_map(found, out)
+    if surface is not None:
+        written.append(surface)
     return written
