@@ -3,6 +3,7 @@ the per-step surfaces against a query at every physics step, contacts, and the s
 
 import gymnasium as gym
 import numpy as np
+import pybullet
 import pytest
 
 import wall_env
@@ -118,3 +119,6 @@ def test_the_scene_keyword_takes_a_file_and_names_a_clash(tmp_path):
         gym.make("WallInspector/WallHover-v0", scene=str(tmp_path / "scene.yaml"), ceiling_z=3.0)
     with pytest.raises(ValueError, match="randomize\\['standoff'\\]: task 'Pier' cannot randomise it"):
         gym.make("WallInspector/Pier-v0", randomize={"standoff": (0.18, 0.25)})
+    client = env.unwrapped._batch.surfaces.client
+    env.close()  # the surface queries' PyBullet client goes with the env
+    assert not pybullet.getConnectionInfo(physicsClientId=client)["isConnected"]

@@ -257,6 +257,11 @@ class EnvBatch:
             ends = moved[sim.timing[moved, Timing.observe_after] >= self.config.physics_substeps]
             sim.x_observed[ends] = sim.x[ends]  # an observation of the step's end sees the response
 
+    def close(self) -> None:
+        """Let go of the PyBullet client of the surface queries (a scene with bodies)."""
+        if self.surfaces is not None:
+            self.surfaces.close()
+
     # ------------------------------------------------------------------ reset
     def reset(self, rows: np.ndarray | slice, spread: np.ndarray | float = 1.0) -> None:
         """Start new episodes in ``rows`` (indices, or ``slice(None)`` for all; start perturbation

@@ -218,6 +218,8 @@ class WallInspectorEnv(gym.Env):
         if self._world is not None:
             self._world.close()
             self._world = None
+        if hasattr(self, "_batch"):
+            self._batch.close()
         self._phase = "closed"
         super().close()
 
