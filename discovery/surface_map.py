@@ -101,17 +101,17 @@ def plot_surface_map(found: Any, out_dir: str | Path) -> Path | None:
     edges_a = np.linspace(along.min(), along.max() + 1e-9, MAP_CELLS[0] + 1)
     edges_h = np.linspace(height.min(), height.max() + 1e-9, MAP_CELLS[1] + 1)
     limit = max(float(np.quantile(np.abs(pulls[0][0]), 0.98)), 1e-6)
-    image = None
+    images = []
     for ax, (pull, title) in zip(axes, pulls):
         total, _, _ = np.histogram2d(along, height, [edges_a, edges_h], weights=pull)
         count, _, _ = np.histogram2d(along, height, [edges_a, edges_h])
         mean = np.where(count >= 3, total / np.maximum(count, 1), np.nan)
-        image = ax.pcolormesh(edges_a, edges_h, mean.T, cmap="RdBu_r", vmin=-limit, vmax=limit)
+        images.append(ax.pcolormesh(edges_a, edges_h, mean.T, cmap="RdBu_r", vmin=-limit, vmax=limit))
         ax.set_title(title, fontsize=10)
         ax.set_xlabel("position along the surface (m)" if how == "flat" else "position around the surface (m)")
     axes[0].set_ylabel("height (m)")
     fig.suptitle("held-out force residual toward the nearest surface, on the surface (cells of 3 samples or more)")
-    fig.colorbar(image, ax=list(axes), label="mean pull toward the surface the model misses (N)")
+    fig.colorbar(images[0], ax=list(axes), label="mean pull toward the surface the model misses (N)")
     path = Path(out_dir) / "residual_on_surface.png"
     fig.savefig(path, dpi=90)
     return path
