@@ -136,3 +136,17 @@ def test_on_a_cylinder_each_rotor_reads_the_analytic_distance_and_normal():
     slots = _slots(out)
     plane_distance = np.einsum("nkj,nkj->nk", slots[:, :, 0, 3:6], rotors - slots[:, :, 0, 0:3])
     np.testing.assert_allclose(plane_distance[seen], found.distance[seen], atol=1e-12)  # the tangent plane's
+
+
+def test_the_shipped_example_scene_loads_and_flies():
+    import gymnasium as gym
+
+    scene = Scene.from_file("docs/examples/building_scene.yaml")
+    assert [type(b) for b in scene.bodies] == [Box, Box, Cylinder] and scene.bodies[1].rpy[2] == pytest.approx(np.pi / 6,
+                                                                                                              abs=1e-4)
+    env = gym.make("WallInspector/WallHover-v0", scene=scene, noise=False)
+    env.reset(seed=0, options={"perturb_start": False})
+    info = env.step(np.zeros(4, dtype=np.float32))[4]
+    # the hover point faces the wall's face 0.16 m out, 1 m up (below its top edge): the near pair pulls
+    assert info["rotor_suction_world"][:, 0].sum() < -0.3 and info["collisions"] == 0
+    env.close()
