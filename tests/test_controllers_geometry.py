@@ -56,3 +56,14 @@ def test_scmpc_holds_the_pier_tighter_than_mpc_and_pid_flies_it_too():
     assert results["scmpc"]["collisions"] == 0 and results["mpc"]["collisions"] == 0
     assert results["scmpc"]["wall_normal_rmse"] < 0.5 * results["mpc"]["wall_normal_rmse"]
     assert results["pid"]["steps"] == 1200 and np.isfinite(results["pid"]["wall_normal_rmse"])
+
+
+def test_a_controller_for_a_scene_with_bodies_is_not_exported_and_says_why(tmp_path):
+    import pytest
+
+    from controllers.export import export_controller
+
+    env = gym.make("WallInspector/Pier-v0")
+    with pytest.raises(ValueError, match="scene with bodies .* cannot be exported"):
+        export_controller(SCMPC.from_env(env, preset=SWEEP.format("scmpc")), tmp_path / "out")
+    assert not (tmp_path / "out").exists()
