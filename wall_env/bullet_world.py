@@ -163,11 +163,12 @@ class BulletWorld:
         vehicle looking along a corridor (walls whose normals cancel)."""
         up = np.array([0.0, 0.0, 1.0])
         normals = [np.asarray(w.normal) for w in self.scene.walls]
-        if not normals and self._bodies:  # in front of the nearest body surface, beside the vehicle
+        if not normals and self._bodies:  # in front of the nearest body surface, beside the vehicle, farther back
             normal = self._nearest_body_normal(target)
-            if normal is not None:
-                normal = normal - normal[2] * up if abs(normal[2]) < 0.9 else normal
-                normals = [normal / np.linalg.norm(normal)]
+            if normal is not None and abs(normal[2]) < 0.9:
+                n = (normal - normal[2] * up) / np.linalg.norm(normal - normal[2] * up)
+                along = np.cross(up, n)
+                return target + 1.4 * n + 1.5 * along + 0.6 * up
         if not normals:
             return target + np.array([-1.2, -1.2, 0.5])
         total = np.sum(normals, axis=0)
