@@ -11,9 +11,10 @@ from wall_inspector.notebooks import NOTEBOOK_DIR, execute
 NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 
 
-def test_the_three_notebooks_exist():
+def test_the_four_notebooks_exist():
     assert [p.name for p in NOTEBOOKS] == [
         "01_wall_suction.ipynb", "02_controllers_vs_ppo.ipynb", "03_discover_missing_effect.ipynb",
+        "04_structures.ipynb",
     ]
 
 
