@@ -33,6 +33,10 @@ apart: only their sum is). The estimate that the controller predicts with moves 
 each step's fit at most ``max_rate`` per second and stays within the bounds: bounded
 and smooth. What it estimates is in :attr:`OnlineSuctionEstimator.theta` and, step by step,
 in the policy's ``estimate_history``.
+
+Among bodies (boxes, cylinders, meshes) ``S`` reads each rotor's local surfaces at the step's
+midpoint, from the policy's PyBullet query (:class:`~wall_env.surfaces.SurfaceQuery`), so a
+facade's window or a pier's curve is not mistaken for a change of the wall's parameters.
 """
 
 from __future__ import annotations
@@ -143,12 +147,16 @@ class OnlineSuctionEstimator:
     """
 
     def __init__(self, model: AeroModel, vehicle: VehicleParams, scene: Scene, control_dt: float,
-                 settings: AdaptationSettings | None = None):
+                 settings: AdaptationSettings | None = None, surfaces: Any = None):
         if model.get("wall_suction") is None or model.get(RESIDUAL_EFFECT) is None:
             raise ValueError(f"the adaptive model needs wall_suction and {RESIDUAL_EFFECT}")
         self.model = model
         self.vehicle = vehicle
         self.settings = settings or AdaptationSettings()
+        if scene.has_bodies and surfaces is None:
+            raise ValueError("a scene with bodies needs the policy's SurfaceQuery (surfaces=...)")
+        self.surfaces = surfaces if scene.has_bodies else None  # wall_env.surfaces.SurfaceQuery
+        self._plane_size = scene.structure.plane_size
         self.dt = check_range("control_dt", control_dt, 1e-4, 1.0)
         labels = model.param_labels()
         self.columns = np.array([labels.index("wall_suction.k_s"), labels.index("wall_suction.d_thr"),
@@ -226,6 +234,8 @@ class OnlineSuctionEstimator:
         inputs[5][:, 0] = mass
         inputs[6][:] = self.model_theta(self.model.theta())
         inputs[7][:] = scene_vectors
+        if self.surfaces is not None:  # the rotors' local surfaces at the midpoint
+            inputs[7][:, self._plane_size:] = self.surfaces.rotor_surfaces_at(inputs[0], R_mid)
         self._function()
         known, basis = self._outputs
         S = basis.reshape(n, len(self.thresholds), 3)  # column-major 3 x C per row: [row, threshold, axis]

@@ -21,7 +21,10 @@ Metrics (:meth:`EvaluationResult.metrics`, pooled over all steps of all episodes
     of the error along the outward normal of the wall nearest to the *reference*
     position at that step (``env.scene``; positive = away from the wall). The
     reference, not the vehicle, picks the wall, so a vehicle that strays does not
-    switch the axis it is judged on. NaN without walls.
+    switch the axis it is judged on. Among bodies (a facade, a pier) the nearest surface
+    of the scene's walls and bodies (PyBullet's closest-point query,
+    :mod:`wall_env.surfaces`) gives the normal: the facade's, the ledge's above it, the
+    pier's radial direction. NaN without walls or bodies.
 ``collisions``, ``collision_episodes``
     steps with a contact (the env counts each contact step) and episodes with at
     least one; ``min_wall_clearance``: smallest duct-to-wall distance seen.
@@ -47,7 +50,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-import wall_env  # noqa: F401  (registers the environments)
+import wall_env  # registers the environments
 from controllers.threads import choose_threads, limit_threads
 from wall_env import interrupts
 from wall_env.vehicle import GRAVITY
@@ -160,11 +163,26 @@ def _policy_name(policy: Any) -> str:
 
 
 def _wall_normals(scene, p_ref: np.ndarray) -> np.ndarray:
-    if not scene.walls:
+    if not scene.walls and not scene.has_bodies:
         return np.zeros_like(p_ref)
-    distances = np.abs(scene.wall_distances(p_ref))  # (n_walls, n)
-    normals = np.array([w.normal for w in scene.walls])
-    return normals[np.argmin(distances, axis=0)]
+    normals = np.zeros_like(p_ref)
+    nearest = np.full(len(p_ref), np.inf)
+    if scene.walls:
+        distances = np.abs(scene.wall_distances(p_ref))  # (n_walls, n)
+        wall_normals = np.array([w.normal for w in scene.walls])
+        nearest = distances.min(axis=0)
+        normals = wall_normals[np.argmin(distances, axis=0)]
+    if scene.has_bodies:
+        from wall_env.surfaces import SurfaceQuery
+
+        query = SurfaceQuery(scene, wall_env.VehicleParams(), reach=5.0)
+        try:
+            _, body_normals, body_distance = query.nearest(p_ref)
+        finally:
+            query.close()
+        closer = body_distance < nearest
+        normals = np.where(closer[:, None], body_normals, normals)
+    return normals
 
 
 def evaluate(

@@ -12,6 +12,11 @@ neither the circle nor the stand-off; they are named task parameters here
 Table II (paper Sec. 4.4, a real flight there): ``WallSweep-v0``, k_s = 4.1 N/m,
 d_thr = 0.132 m, command noise on, 10 seeds; PID, MPC, SC-MPC.
 
+Beyond the paper, the structures (table ``"S"``, :data:`STRUCTURES`): ``Facade-v0`` (window
+recesses and a ledge) and ``Pier-v0`` (a cylinder), k_s = 4.1 N/m, d_thr = 0.132 m,
+command noise on, 10 seeds each, the suction read from each rotor's nearest surfaces
+(:mod:`wall_env.surfaces`); the wall-normal error is along the nearest surface's normal.
+
 Every flight runs with ``terminate_on_collision=False``: the vehicle bounces off the
 wall, the contact is counted, and the flight covers the whole reference, as the
 paper's flights went on after contacts. Every policy flies the same seeds.
@@ -42,20 +47,22 @@ from controllers.mpc.policy import MPC, SCMPC
 from controllers.pid import PID
 
 __all__ = [
-    "Scenario", "ScenarioResult", "TABLE_I", "TABLE_II", "TABLE_I_SEEDS", "TABLE_II_SEEDS", "PAPER_VALUES",
+    "Scenario", "ScenarioResult", "TABLE_I", "TABLE_II", "STRUCTURES", "TABLE_I_SEEDS", "TABLE_II_SEEDS",
+    "STRUCTURE_SEEDS", "PAPER_VALUES",
     "TABLE_I_STANDOFF", "Flight", "FlightExecutor", "fly", "table_flights", "controller_policies", "run_scenarios",
     "markdown_tables", "acceptance", "markdown_checks", "results_json", "timing_json", "write_outputs",
 ]
 
 TABLE_I_SEEDS = tuple(range(5))
 TABLE_II_SEEDS = tuple(range(10))
+STRUCTURE_SEEDS = tuple(range(10))
 
 
 @dataclass(frozen=True)
 class Scenario:
     """One row group of a table: a task with its suction parameters and seeds."""
 
-    table: str  # "I" or "II"
+    table: str  # "I", "II" or "S" (the structures)
     env_id: str
     k_s: float  # N/m
     d_thr: float  # m
@@ -64,7 +71,14 @@ class Scenario:
 
     @property
     def name(self) -> str:
+        if self.table == "S":
+            return f"{self.task}, k_s={self.k_s:g} N/m, d_thr={self.d_thr:g} m"
         return f"Table {self.table}, k_s={self.k_s:g} N/m, d_thr={self.d_thr:g} m"
+
+    @property
+    def task(self) -> str:
+        """The task name (``"Facade"``)."""
+        return self.env_id.split("/")[-1].removesuffix("-v0")
 
     def make_kwargs(self) -> dict[str, Any]:
         return {"k_s": self.k_s, "d_thr": self.d_thr, "noise": True, "terminate_on_collision": False,
@@ -82,6 +96,8 @@ needs a clearance of 3.6 to 4.5 cm, i.e. a stand-off of 0.147 to 0.156 m with th
 TABLE_I = tuple(Scenario("I", "WallInspector/WallCircle-v0", k_s, 0.10, TABLE_I_SEEDS,
                          {"standoff": TABLE_I_STANDOFF}) for k_s in (1.0, 4.0, 10.0))
 TABLE_II = (Scenario("II", "WallInspector/WallSweep-v0", 4.1, 0.132, TABLE_II_SEEDS),)
+STRUCTURES = tuple(Scenario("S", env_id, 4.1, 0.132, STRUCTURE_SEEDS)
+                   for env_id in ("WallInspector/Facade-v0", "WallInspector/Pier-v0"))
 
 # The paper's figures (cm) for the README and the printed comparison.
 PAPER_VALUES: dict[str, dict[Any, Any]] = {
@@ -296,6 +312,20 @@ def markdown_tables(results: Sequence[ScenarioResult], note: str = "") -> str:
                        + " | ".join(_cm(v) for v in m["mae"]) + f" | {rmse_p} | {mae_p} | {_collisions(m)} | "
                        f"{_cm(m['min_wall_clearance'])} |")
         out.append("")
+    structures = [r for r in results if r.scenario.table == "S"]
+    if structures:
+        seeds = len(structures[0].scenario.seeds)
+        out.append(f"**Structures** (beyond the paper): `Facade-v0` (past two window recesses, around a ledge and back "
+                   f"over it) and `Pier-v0` (a circle around a cylinder), k_s = 4.1 N/m, d_thr = 0.132 m, command noise "
+                   f"on, {seeds} seeds each; each rotor's suction from its nearest surfaces (PyBullet), the wall-normal "
+                   "error along the nearest surface's normal, cm.\n")
+        out.append("| Task | Method | wall-normal MAE | wall-normal RMSE | RMSE (3-D) | collisions | min clearance |")
+        out.append("|---|---|---|---|---|---|---|")
+        for r in structures:
+            m = r.metrics()
+            out.append(f"| {r.scenario.task} | {r.policy} | {_cm(m['wall_normal_mae'])} | {_cm(m['wall_normal_rmse'])} | "
+                       f"{_cm(m['rmse_norm'])} | {_collisions(m)} | {_cm(m['min_wall_clearance'])} |")
+        out.append("")
     return "\n".join(out)
 
 
@@ -311,9 +341,10 @@ def acceptance(results: Sequence[ScenarioResult], table_i_paper_match: bool = Fa
     ``paper-sim`` preset) also every cell the paper reports within a factor 1.5 of the
     paper's RMSE, SC-MPC below MPC at every k_s and MPC's RMSE growing with k_s.
     """
-    def find(table: str, policy: str, k_s: float | None = None) -> dict[str, Any] | None:
+    def find(table: str, policy: str, k_s: float | None = None, task: str | None = None) -> dict[str, Any] | None:
         for r in results:
-            if r.scenario.table == table and r.policy == policy and (k_s is None or r.scenario.k_s == k_s):
+            if r.scenario.table == table and r.policy == policy and (k_s is None or r.scenario.k_s == k_s) \
+                    and (task is None or r.scenario.task == task):
                 return r.metrics()
         return None
 
@@ -336,6 +367,12 @@ def acceptance(results: Sequence[ScenarioResult], table_i_paper_match: bool = Fa
                     find("II", method + AUTHORS), 1.0)
     ratio_check("Table I, k_s=10: SC-MPC / MPC wall-normal RMSE", find("I", "SC-MPC", 10.0), find("I", "MPC", 10.0),
                 0.3)
+    for task in sorted({r.scenario.task for r in results if r.scenario.table == "S"}):
+        sc_s = find("S", "SC-MPC", task=task)
+        if sc_s is not None:
+            checks.append({"check": f"{task}: SC-MPC has no collision", "value": sc_s["collisions"],
+                           "pass": sc_s["collisions"] == 0})
+        ratio_check(f"{task}: SC-MPC / MPC wall-normal RMSE", sc_s, find("S", "MPC", task=task), 0.5)
     if table_i_paper_match:
         for (policy, k_s), (_, paper_rmse) in PAPER_VALUES["I"].items():
             m = find("I", policy, k_s)
@@ -451,6 +488,38 @@ def _plot_table_ii(results: Sequence[ScenarioResult], path: Path, seed_index: in
     fig.savefig(path, dpi=110)
 
 
+def _plot_structures(results: Sequence[ScenarioResult], path: Path, seed_index: int = 0) -> None:
+    """Each structure task: the path flown by each method in the plane that shows it (the facade seen from the
+    front, the pier from above) and the wall-normal error against time."""
+    from matplotlib.figure import Figure  # not pyplot: must not switch the caller's backend
+
+    tasks = sorted({r.scenario.task for r in results})
+    fig = Figure(figsize=(12, 4.2 * len(tasks)))
+    axes = fig.subplots(len(tasks), 2, squeeze=False, gridspec_kw={"width_ratios": [1, 1.4]})
+    for row, task in enumerate(tasks):
+        ax_path, ax_err = axes[row]
+        runs = [r for r in results if r.scenario.task == task]
+        plane = (1, 2) if task == "Facade" else (0, 1)
+        for k, r in enumerate(runs):
+            e = r.evaluation.episodes[seed_index]
+            if k == 0:
+                ax_path.plot(e.p_ref[:, plane[0]], e.p_ref[:, plane[1]], "k--", lw=1, label="reference")
+            ax_path.plot(e.p_world[:, plane[0]], e.p_world[:, plane[1]], lw=1, label=r.policy)
+            ax_err.plot(e.time, 100 * e.wall_normal_error, lw=1, label=r.policy)
+        ax_path.set_xlabel(f"{'xyz'[plane[0]]} (m)")
+        ax_path.set_ylabel(f"{'xyz'[plane[1]]} (m)")
+        ax_path.set_aspect("equal", adjustable="datalim")
+        ax_path.set_title(f"{task}-v0 (seed {runs[0].evaluation.seeds[seed_index]}): "
+                          + ("the facade seen from the front" if task == "Facade" else "the pier from above"))
+        ax_err.axhline(0.0, color="k", lw=0.6)
+        ax_err.set_xlabel("time (s)")
+        ax_err.set_ylabel("error along the nearest surface's normal (cm)")
+        ax_path.legend(fontsize=8)
+        ax_err.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
 def markdown_checks(checks: Sequence[dict[str, Any]]) -> str:
     """The acceptance checks as a Markdown list: verdict, check, measured value."""
     lines = ["Acceptance checks, as measured by this run:", ""]
@@ -485,4 +554,8 @@ def write_outputs(results: Sequence[ScenarioResult], out_dir: str | Path, note: 
     if table_ii:
         paths["table_ii_figure"] = out / "table_ii_sweep.png"
         _plot_table_ii(table_ii, paths["table_ii_figure"])
+    structures = [r for r in results if r.scenario.table == "S"]
+    if structures:
+        paths["structures_figure"] = out / "structures.png"
+        _plot_structures(structures, paths["structures_figure"])
     return paths

@@ -151,6 +151,9 @@ class ControllerPolicy:
                 raise ValueError(f"{self.name}: env {index} now has a scene of another structure "
                                  f"({scene.structure} instead of {self.description.scene.structure}); "
                                  "build the controller again for it")
+            if scene.bodies != self.description.scene.bodies:
+                raise ValueError(f"{self.name}: env {index} now has other bodies in its scene than the controller "
+                                 "was built for; build the controller again for it")
         return self._new_memory(scene, reference)
 
     def _before_batch(self, n: int) -> None:

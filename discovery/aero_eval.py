@@ -11,6 +11,11 @@ For speed the per-sample function is mapped over a fixed chunk of samples
 (cached on disk, so only the first use on a machine pays the compile time); samples
 are fed chunk by chunk. Without a C compiler the same mapped function runs in
 CasADi's evaluator.
+
+A scene with bodies (:mod:`wall_env.bodies`) gives every sample its own scene vector: the
+planes, then each rotor's local surfaces at that sample's pose from PyBullet's query
+(:class:`wall_env.surfaces.SurfaceQuery`, reaching as far as any threshold a fit may try),
+read by the effects exactly as the simulator reads them.
 """
 
 from __future__ import annotations
@@ -25,7 +30,8 @@ import numpy as np
 from wall_env.aero import AeroModel
 from wall_env.codegen import CompiledFunction
 from wall_env.effects import make_effect
-from wall_env.scene import Scene, Wall
+from wall_env.scene import Scene
+from wall_env.vehicle import VehicleParams
 
 __all__ = ["SampleStates", "ForceEvaluator", "CHUNK"]
 
@@ -56,8 +62,7 @@ class SampleStates:
 def _mapped(structure_key: tuple, rotors: tuple, scene_structure: tuple, gravity: float,
             jacobian: bool) -> CompiledFunction:
     model = AeroModel([make_effect(name, **dict(options)) for name, options in structure_key])
-    placeholder = _placeholder_scene(scene_structure)
-    f = model.function(np.asarray(rotors), placeholder, gravity)
+    f = model.structure_function(np.asarray(rotors), scene_structure, gravity)
     symbols = [ca.SX.sym(f.name_in(i), f.sparsity_in(i)) for i in range(f.n_in())]
     force = f(*symbols)[0]
     outputs = [force]
@@ -66,8 +71,9 @@ def _mapped(structure_key: tuple, rotors: tuple, scene_structure: tuple, gravity
         outputs.append(ca.densify(ca.reshape(ca.jacobian(force, theta), 3 * model.param_size, 1)))
     outputs = [ca.densify(o) for o in outputs]
     per_sample = ca.Function("effect_force_jac" if jacobian else "effect_force", symbols, outputs)
-    # theta may differ per sample (one call serves models fitted on different folds);
-    # mass and scene are shared by all samples of a chunk
+    # theta may differ per sample (one call serves models fitted on different folds); mass is shared by all
+    # samples of a chunk, and so is the scene unless it has bodies (each sample then has its rotors' surfaces)
+    per_sample_scene = len(scene_structure) > 3 and scene_structure[3] > 0
     mapped = per_sample.map(CHUNK, "serial")
     # MX keeps the map a loop in the generated code (SX would unroll CHUNK copies)
     p = ca.MX.sym("p", 3, CHUNK)
@@ -77,18 +83,23 @@ def _mapped(structure_key: tuple, rotors: tuple, scene_structure: tuple, gravity
     f_rotor = ca.MX.sym("f", 4, CHUNK)
     mass = ca.MX.sym("mass")
     th = ca.MX.sym("theta", model.param_size, CHUNK)
-    scene = ca.MX.sym("scene", symbols[7].numel())
-    out = mapped(p, R, v, w, f_rotor, ca.repmat(mass, 1, CHUNK), th, ca.repmat(scene, 1, CHUNK))
+    scene = ca.MX.sym("scene", symbols[7].numel(), CHUNK if per_sample_scene else 1)
+    out = mapped(p, R, v, w, f_rotor, ca.repmat(mass, 1, CHUNK), th,
+                 scene if per_sample_scene else ca.repmat(scene, 1, CHUNK))
     out = out if isinstance(out, (list, tuple)) else [out]
     name = f"discovery_{'jac' if jacobian else 'force'}"
     chunk_function = ca.Function(name, [p, R, v, w, f_rotor, mass, th, scene], list(out))
     return CompiledFunction(chunk_function)
 
 
-def _placeholder_scene(structure: tuple) -> Scene:
-    n_walls, has_ground, has_ceiling = structure
-    return Scene(tuple(Wall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)) for _ in range(n_walls)),
-                 0.0 if has_ground else None, 10.0 if has_ceiling else None)
+SURFACE_REACH = 1.05  # m: each rotor's surfaces as far as the largest suction threshold (1 m) and a margin
+
+
+@lru_cache(maxsize=8)
+def _surface_query(scene: Scene, rotors: tuple) -> Any:
+    from wall_env.surfaces import SurfaceQuery
+
+    return SurfaceQuery(scene, VehicleParams(rotor_positions=rotors), SURFACE_REACH)
 
 
 class ForceEvaluator:
@@ -103,6 +114,7 @@ class ForceEvaluator:
     def __init__(self, model: AeroModel, rotor_positions_body: np.ndarray, scene: Scene, gravity: float):
         self.model = model
         self.param_size = model.param_size
+        self.scene = scene
         self.scene_vector = scene.to_vector()
         key = (model.structure_key, tuple(map(tuple, np.asarray(rotor_positions_body, dtype=float))),
                scene.structure, float(gravity))
@@ -141,13 +153,27 @@ class ForceEvaluator:
         if not per_sample:
             shared = np.repeat(theta.reshape(-1, 1), CHUNK, axis=1).ravel(order="F")
         outputs: list[list[np.ndarray]] = []
-        for p, R, v, w, f, index, count in self._packed(states):
+        scenes = self._surface_chunks(states) if self.scene.has_bodies else None
+        for chunk, (p, R, v, w, f, index, count) in enumerate(self._packed(states)):
             th = np.ravel(theta[index].T, order="F") if per_sample else shared
-            result = function(p, R, v, w, f, states.mass, th, self.scene_vector)
+            scene = self.scene_vector if scenes is None else scenes[chunk]
+            result = function(p, R, v, w, f, states.mass, th, scene)
             outputs.append([r.reshape(-1, CHUNK, order="F")[:, :count] for r in result])
         if n == 0:
             return [np.zeros((3, 0)), np.zeros((3 * self.param_size, 0))]
         return [np.concatenate([o[k] for o in outputs], axis=1) for k in range(len(outputs[0]))]
+
+    def _surface_chunks(self, states: SampleStates) -> list[np.ndarray]:
+        """Per chunk, every sample's scene vector (the planes, then its rotors' local surfaces), column-major;
+        cached on ``states`` per scene."""
+        cache = states.__dict__.setdefault("_surface_chunks", {})
+        if self.scene not in cache:
+            rotors = tuple(map(tuple, self._key[1]))
+            surfaces = _surface_query(self.scene, rotors).rotor_surfaces_at(states.p_world, states.R_body_to_world)
+            plane = self.scene_vector[: self.scene.structure.plane_size]
+            vectors = np.hstack([np.tile(plane, (states.n, 1)), surfaces])
+            cache[self.scene] = [np.ravel(vectors[index].T, order="F") for *_, index, _ in self._packed(states)]
+        return cache[self.scene]
 
     def force(self, states: SampleStates, theta: np.ndarray) -> np.ndarray:
         """Force ``(n, 3)`` in the world frame; ``theta`` ``(param_size,)`` or one row per sample."""

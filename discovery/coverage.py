@@ -103,7 +103,8 @@ def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
         v = values.get(name)
         return None if v is None or not np.isfinite(v).any() else float(np.nanmin(v))
 
-    walls = sorted(n for n in values if n.startswith("nearest rotor distance to wall"))
+    walls = sorted(n for n in values if n.startswith("nearest rotor distance to wall")
+                   or n == "nearest rotor distance to the structure")
     if not walls:
         out.append({"effects": ["wall_suction"], "reason": "the scene has no wall",
                     "manoeuvre": "add the wall to the scene (sidecar or --scene) and fly within "

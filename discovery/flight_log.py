@@ -33,8 +33,14 @@ The JSON file::
                  "thrust_map": {"kind", "coefficient", "source"} (optional, see ThrustMap),
                  "motor_time_constant": s (optional, zero if absent)},
      "scene": {"walls": [{"point": [x, y, z], "normal": [nx, ny, nz]}, ...],
-               "ground_z": number or null, "ceiling_z": number or null},
+               "ground_z": number or null, "ceiling_z": number or null,
+               "bodies": [{"type": "box", "size": [...], "position": [...]}, ...] (optional)},
      "gravity": 9.81}
+
+``bodies`` (optional) holds the finite structures the flight was near: boxes, cylinders,
+OBJ meshes and URDF models in the scene-file form of :mod:`wall_env.bodies` (a wall that
+ends, a facade, a pier); a mesh's or URDF's ``file`` is read relative to the sidecar's
+folder. Effects then read each rotor's distance to them from PyBullet, as the simulator does.
 
 The vehicle block is the nominal model the user believes in; nothing in it says what
 is missing. ``thrust_map`` records how an imported log's normalised commands became the
@@ -67,6 +73,7 @@ from typing import Any
 
 import numpy as np
 
+from wall_env.bodies import body_from_dict
 from wall_env.motor_lag import MAX_TIME_CONSTANT
 from wall_env.scene import Scene, Wall
 from wall_env.vehicle import GRAVITY, VehicleParams
@@ -252,9 +259,10 @@ class FlightLog:
         edges = [0, *breaks.tolist(), self.n_samples]
         return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
-    def sidecar(self) -> dict[str, Any]:
-        """The JSON sidecar as a dictionary."""
-        return {"vehicle": self.vehicle.to_dict(), "scene": self.scene.to_dict(), "gravity": self.gravity}
+    def sidecar(self, relative_to: str | Path | None = None) -> dict[str, Any]:
+        """The JSON sidecar as a dictionary; mesh and URDF files of the scene's bodies relative to folder
+        ``relative_to`` where they lie below it."""
+        return {"vehicle": self.vehicle.to_dict(), "scene": self.scene.to_dict(relative_to), "gravity": self.gravity}
 
     def select(self, index: slice | np.ndarray) -> FlightLog:
         """The samples ``index`` as a new log (same vehicle and scene)."""
@@ -467,7 +475,7 @@ _SCHEMA_TOP = {"vehicle": True, "scene": True, "gravity": False}  # key -> requi
 _SCHEMA_VEHICLE = {"mass": True, "rotor_positions": True, "drag": False, "thrust_map": False,
                    "motor_time_constant": False}
 _SCHEMA_THRUST_MAP = {"kind": True, "coefficient": True, "source": False}
-_SCHEMA_SCENE = {"walls": True, "ground_z": True, "ceiling_z": True}
+_SCHEMA_SCENE = {"walls": True, "ground_z": True, "ceiling_z": True, "bodies": False}
 _SCHEMA_WALL = {"point": True, "normal": True}
 
 
@@ -580,6 +588,15 @@ def parse_sidecar(path: Path, text: str, data: Any) -> tuple[NominalVehicle, Sce
     ceiling_z = check.number("scene.ceiling_z", scene_data["ceiling_z"], -1e4, 1e4, allow_null=True)
     if ground_z is not None and ceiling_z is not None and ceiling_z <= ground_z:
         raise check.fail("scene.ceiling_z", f"must be above scene.ground_z = {ground_z}, got {ceiling_z}")
+    bodies_data = scene_data.get("bodies", [])
+    if not isinstance(bodies_data, list):
+        raise check.fail("scene.bodies", f"must be a list of bodies, got {_type_name(bodies_data)}")
+    bodies = []
+    for k, body in enumerate(bodies_data):
+        try:
+            bodies.append(body_from_dict(body, base=path.parent, where=f"scene.bodies[{k}]"))
+        except ValueError as exc:
+            raise check.fail(f"scene.bodies[{k}]", str(exc)) from None
     gravity = check.number("gravity", data["gravity"], 0.1, 100.0) if "gravity" in data else GRAVITY
     thrust_map = None
     if "thrust_map" in vehicle_data:
@@ -600,7 +617,7 @@ def parse_sidecar(path: Path, text: str, data: Any) -> tuple[NominalVehicle, Sce
         vehicle.to_vehicle_params()
     except ValueError as exc:
         raise check.fail("vehicle", str(exc)) from None
-    return vehicle, Scene(tuple(walls), ground_z, ceiling_z), gravity
+    return vehicle, Scene(tuple(walls), ground_z, ceiling_z, tuple(bodies)), gravity
 
 
 # ====================================================================== writing
@@ -653,5 +670,5 @@ def write_log(log: FlightLog, path: str | Path, *, overwrite: bool = False, prec
     with open(csv_path, "w", newline="") as handle:
         handle.write(",".join(header) + "\n")
         np.savetxt(handle, table, delimiter=",", fmt=f"%.{precision}g")
-    json_path.write_text(json.dumps(log.sidecar(), indent=2) + "\n")
+    json_path.write_text(json.dumps(log.sidecar(relative_to=json_path.parent), indent=2) + "\n")
     return csv_path, json_path

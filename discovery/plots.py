@@ -16,6 +16,9 @@ open-loop predictions against measurements.
 ``unexplained_shape.png``, ``unexplained_where.png``
     when a residual is left that the model does not explain: its shape against the state it
     depends on, or the residual against time and its mean over the position map.
+``residual_on_surface.png``
+    with walls or bodies in the scene: the held-out residual toward the surface on a map of
+    the surface, position along it against height (:mod:`discovery.surface_map`).
 """
 
 from __future__ import annotations
@@ -165,6 +168,7 @@ def plot_all(found, out_dir: str | Path) -> list[Path]:
         path = out / "unexplained_shape.png"
         fig.savefig(path, dpi=110)
         written.append(path)
+    from discovery.surface_map import plot_surface_map
 
     # ---------------------------------------------------------------- where an unexplained residual lives
     left = found.unexplained_ or {}
@@ -198,4 +202,7 @@ def plot_all(found, out_dir: str | Path) -> list[Path]:
         fig.savefig(path, dpi=90)
         written.append(path)
 
+    surface = plot_surface_map(found, out)
+    if surface is not None:
+        written.append(surface)
     return written

@@ -1,7 +1,9 @@
 """Where a residual (or an effect's force) lives: candidate regressors and localisation.
 
 Candidate regressors, per sample (SI): the distance of each rotor centre to each wall
-plane and the nearest one per wall, the height of the lowest rotor above the ground,
+plane and the nearest one per wall, to the nearest surface of the scene's bodies (each
+rotor and the nearest rotor; PyBullet's query, :mod:`wall_env.surfaces`, as far as it
+reaches), the height of the lowest rotor above the ground,
 the depth of the highest rotor under the ceiling, the speed and the (signed) velocity
 along each body axis, the collective thrust and the time. Rotor positions come from
 the smoothed position and logged attitude.
@@ -67,6 +69,11 @@ def regressors(data: FlightData) -> list[Regressor]:
             add(f"nearest rotor distance to wall {k}", "m", s, d.min(axis=1))
             for j in range(4):
                 add(f"rotor {j} distance to wall {k}", "m", s, d[:, j])
+        if seg.scene.has_bodies:  # the tangent plane of each rotor's nearest surface (slot 0), at this pose
+            d = _body_distances(seg.scene, rotors, p, R)
+            add("nearest rotor distance to the structure", "m", s, d.min(axis=1))
+            for j in range(4):
+                add(f"rotor {j} distance to the structure", "m", s, d[:, j])
         if seg.scene.ground_z is not None:
             add("height above ground", "m", s, rotor_world[:, :, 2].min(axis=1) - seg.scene.ground_z)
         if seg.scene.ceiling_z is not None:
@@ -110,6 +117,19 @@ def time_intervals(data: FlightData, mask: np.ndarray, min_gap_s: float = 0.5) -
         if current is not None:
             out.append({"log": seg.source, "from_s": round(current[0], 3), "to_s": round(current[1], 3)})
     return out
+
+
+def _body_distances(scene: Any, rotors: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Each rotor centre's distance ``(n, 4)`` to the nearest surface of the scene's bodies (the query's reach
+    where none is nearer)."""
+    from discovery.aero_eval import SURFACE_REACH, _surface_query
+    from wall_env.scene import SURFACE_SIZE, SURFACE_SLOTS
+
+    slots = _surface_query(scene, tuple(map(tuple, rotors))).rotor_surfaces_at(p, R)
+    slots = slots.reshape(len(p), 4, SURFACE_SLOTS, SURFACE_SIZE)[:, :, 0]  # slot 0: the nearest
+    rotor_world = p[:, None, :] + np.einsum("nij,rj->nri", R, rotors)
+    d = np.einsum("nrj,nrj->nr", slots[:, :, 3:6], rotor_world - slots[:, :, 0:3])
+    return np.where(slots[:, :, 6] > 0, d, SURFACE_REACH)
 
 
 def localise_residual(data: FlightData, residual: np.ndarray, candidates: list[Regressor] | None = None,

@@ -174,6 +174,7 @@ _NEAR = {"amplitude": (0.6, 0.6, 0.06), "period": (7.0, 9.0, 3.5)}  # slow, +-0.
 #: near a ground or a ceiling: stiff vertically, with integral action, so the survey flies the planned distances
 _NEAR_GAINS = {"kp": [8.0, 8.0, 30.0], "kv": [4.0, 4.0, 11.0], "ki": [0.0, 0.0, 30.0]}
 _ARM = 0.1 / math.sqrt(2.0)  # the default vehicle's rotor offset along body x (m)
+FINITE_WALL_TOP = 1.2  # m, where the finite wall of ``finite-wall-survey`` ends
 
 SCENARIOS: dict[str, Scenario] = {
     s.name: s
@@ -186,6 +187,15 @@ SCENARIOS: dict[str, Scenario] = {
                  "with a PID stiff enough (Kp 30 1/s^2) to fly inside the suction zone", "WallInspector/WallHover-v0",
                  {"standoff": 0.25, "altitude": 1.0, "max_tracking_error": 100.0, "duration": 30.0},
                  survey={"amplitude": (0.05, 0.6, 0.3), "period": (6.0, 9.0, 5.0), "centre": (0.13 + _ARM, 0.0, 1.0)},
+                 policy_kwargs={"kp": [30.0, 30.0, 10.0], "kv": [11.0, 11.0, 6.0]}),
+        Scenario("finite-wall-survey", "the wall survey along a wall that ends 1.2 m up (a box: the scene says "
+                 "so), the survey crossing its top edge: the near rotors 0.08 to 0.18 m from its face, the vehicle "
+                 "0.85 to 1.55 m high", "WallInspector/WallHover-v0",
+                 {"standoff": 0.25, "altitude": 1.2, "max_tracking_error": 100.0, "duration": 30.0,
+                  "scene": {"bodies": [{"type": "box", "size": [0.2, 6.0, FINITE_WALL_TOP],
+                                        "position": [-0.1, 0.0, FINITE_WALL_TOP / 2]}]}},
+                 survey={"amplitude": (0.05, 0.6, 0.35), "period": (6.0, 9.0, 5.0),
+                         "centre": (0.13 + _ARM, 0.0, FINITE_WALL_TOP)},
                  policy_kwargs={"kp": [30.0, 30.0, 10.0], "kv": [11.0, 11.0, 6.0]}),
         Scenario("floor-to-ceiling", "the sweep from 0.15 m above the ground to 0.17 m under a ceiling, "
                  "0.5 m from the wall", "WallInspector/WallSweep-v0",

@@ -177,12 +177,13 @@ def test_profiles_and_bad_conditions_are_named():
         gym.make("WallInspector/WallHover-v0", conditions="realistic", motor_time_constant=0.02)
 
 
-def test_ideal_conditions_change_nothing_and_a_row_flies_as_the_single_env_under_every_condition():
+@pytest.mark.parametrize("env_id", ["WallInspector/WallSweep-v0", "WallInspector/Facade-v0"])
+def test_ideal_conditions_change_nothing_and_a_row_flies_as_the_single_env_under_every_condition(env_id):
     kwargs = {"conditions": {"sensing": "visual_inertial", "wind": "moderate"},
                   "randomize": {"push": (0, 1), "latency": (0, 0.03), "motor_time_constant": (0.0, 0.05),
                              "sensing_scale": (0, 2), "gust_scale": (0, 2), "k_s": (1, 12)}}
-    envs = gym.make_vec("WallInspector/WallSweep-v0", num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
-    single = gym.make("WallInspector/WallSweep-v0", **kwargs)
+    envs = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
+    single = gym.make(env_id, **kwargs)
     rows, _ = envs.reset(seed=[7, 8, 9])
     one, _ = single.reset(seed=8)
     np.testing.assert_array_equal(rows[1], one)

@@ -156,22 +156,26 @@ def test_paper_scenarios_are_the_papers():
 
 
 def test_compare_command_writes_its_outputs(tmp_path, capsys):
-    code = cli_main(["compare", "--out", str(tmp_path), "--seeds-i", "1", "--seeds-ii", "1", "--duration", "0.3",
-                     "--no-progress"])
+    code = cli_main(["compare", "--out", str(tmp_path), "--seeds-i", "1", "--seeds-ii", "1", "--seeds-structures", "1",
+                     "--duration", "0.3", "--no-progress"])
     assert code == 0
     out = capsys.readouterr().out
     assert "Acceptance checks" in out and "**Table II**" in out and out.startswith("**Tuned presets**")
+    assert "**Structures**" in out
     # tuned rows, the paper's SC-MPC form and the authors' settings as extra rows, PPO's budget beside theirs
-    for row in ("| SC-MPC (dynamics only) |", "| MPC (authors') |", "| PID (authors') |", "| WallSweep | PPO |"):
+    for row in ("| SC-MPC (dynamics only) |", "| MPC (authors') |", "| PID (authors') |", "| WallSweep | PPO |",
+                "| Facade | SC-MPC |", "| Pier | MPC (authors') |"):
         assert row in out
     data = json.loads((tmp_path / "results.json").read_text())
     checks = data["acceptance"]
     assert checks[-1]["check"].startswith("Table II: PPO")
     assert any(c["check"] == "Table II: MPC / MPC (authors') wall-normal RMSE <= 1" for c in checks)
+    assert {"Facade: SC-MPC has no collision", "Pier: SC-MPC / MPC wall-normal RMSE <= 0.5"} <= {
+        c["check"] for c in checks}
     assert {r["method"] for r in data["budgets"]} == {"PID", "MPC", "SC-MPC", "PPO"}
-    assert sum(line.startswith("- ") for line in (tmp_path / "tables.md").read_text().splitlines()) == len(checks) == 8
+    assert sum(line.startswith("- ") for line in (tmp_path / "tables.md").read_text().splitlines()) == len(checks) == 12
     assert {p.name for p in tmp_path.iterdir()} == {"tables.md", "results.json", "timing.json", "table_i_circle.png",
-                                                   "table_ii_sweep.png"}
+                                                   "table_ii_sweep.png", "structures.png"}
 
 
 @pytest.mark.parametrize("args, message", [

@@ -26,10 +26,11 @@ def test_check_env_passes(env_id):
     env.close()
 
 
-def test_all_four_tasks_are_registered_under_the_namespace():
+def test_all_six_tasks_are_registered_under_the_namespace():
     assert set(wall_env.ENV_IDS) == {
         "WallInspector/WallHover-v0", "WallInspector/WallCircle-v0",
         "WallInspector/WallSweep-v0", "WallInspector/Corridor-v0",
+        "WallInspector/Facade-v0", "WallInspector/Pier-v0",
     }
     for env_id in wall_env.ENV_IDS:
         assert env_id in gym.registry

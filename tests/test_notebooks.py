@@ -14,7 +14,7 @@ NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 def test_the_notebooks_exist():
     assert [p.name for p in NOTEBOOKS] == [
         "01_wall_suction.ipynb", "02_controllers_vs_ppo.ipynb", "03_discover_missing_effect.ipynb",
-        "04_learning_the_wall.ipynb",
+        "04_learning_the_wall.ipynb", "05_structures.ipynb",
     ]
 
 

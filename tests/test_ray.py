@@ -56,7 +56,8 @@ def test_bad_ray_options_are_one_line_usage_errors(tmp_path, capsys, args, messa
 
 
 def test_compare_on_a_two_node_cluster_writes_the_local_json_byte_for_byte(cluster, tmp_path):
-    common = ["compare", "--seeds-i", "1", "--seeds-ii", "2", "--duration", "0.4", "--no-progress", "--no-authors"]
+    common = ["compare", "--tables", "both", "--seeds-i", "1", "--seeds-ii", "2", "--duration", "0.4", "--no-progress",
+              "--no-authors"]
     assert cli_main([*common, "--out", str(tmp_path / "local")]) == 0
     assert cli_main([*common, "--out", str(tmp_path / "ray"), "--ray", cluster.address]) == 0
     local, remote = (tmp_path / "local" / "results.json").read_bytes(), (tmp_path / "ray" / "results.json").read_bytes()

@@ -81,6 +81,9 @@ def _fly_both(env_id, seeds, steps, action_fn, **kwargs):
     ("WallInspector/WallHover-v0", {"terminate_on_collision": False, "max_tracking_error": 5.0,
                                     "randomize": {"k_s": (2.0, 8.0), "mass": (0.9, 1.1), "standoff": (0.13, 0.2)}}),
     ("WallInspector/Corridor-v0", {"terminate_on_collision": True, "randomize": {"standoff": (0.17, 0.25)}}),
+    ("WallInspector/Facade-v0", {"terminate_on_collision": False, "max_tracking_error": 5.0,
+                                 "randomize": {"k_s": (2.0, 8.0), "d_thr": (0.1, 0.2), "standoff": (0.14, 0.2)}}),
+    ("WallInspector/Pier-v0", {"terminate_on_collision": True, "randomize": {"mass": (0.9, 1.1)}}),
 ])
 def test_batched_and_single_envs_fly_the_same_trajectories_and_contacts(env_id, kwargs):
     def toward_wall(rng, t, n):  # roll/pitch about at random with a bias that drives the vehicles into walls
@@ -262,10 +265,14 @@ def test_bench_env_batched_writes_its_table_json_and_plot(tmp_path):
 
     files = {kind: tmp_path / f"bench.{kind}" for kind in ("md", "json", "png")}
     code = main(["bench-env", "--batched", "--steps", "200", "--sizes", "1", "8", "--batched-steps", "200",
-                 "--two-core-n", "0", "--memory-resets", "3", "--markdown", str(files["md"]),
+                 "--two-core-n", "0", "--memory-resets", "3", "--geometry-n", "4", "--markdown", str(files["md"]),
                  "--json", str(files["json"]), "--plot", str(files["png"])])
     assert code == 0
     payload = json.loads(files["json"].read_text())
+    assert [r["env_id"] for r in payload["geometry"]] == ["WallInspector/WallSweep-v0", "WallInspector/Facade-v0",
+                                                          "WallInspector/Pier-v0"]
+    assert all(r["n"] == 4 and r["steps_per_s"] > 0 for r in payload["geometry"])
+    assert "| `WallInspector/Facade-v0` |" in files["md"].read_text()
     assert [r["n"] for r in payload["batched"]] == [1, 8]
     assert all(r["steps_per_s"] > 0 and r["env_steps"] >= 200 for r in payload["batched"])
     assert payload["batched"][1]["ratio_to_single"] == pytest.approx(

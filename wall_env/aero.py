@@ -16,7 +16,7 @@ import casadi as ca
 import numpy as np
 
 from wall_env.effects import Effect, FlightContext, Wrench, effects_from_spec, make_effect
-from wall_env.scene import Scene, Wall
+from wall_env.scene import Scene, SceneSymbols, scene_symbols
 from wall_env.vehicle import GRAVITY
 
 __all__ = ["AeroModel"]
@@ -88,7 +88,7 @@ class AeroModel:
         """What the symbolic expression depends on besides the numeric parameters."""
         return tuple((e.name, tuple(sorted(e.option_values.items()))) for e in self.effects)
 
-    def wrench(self, ctx: FlightContext, theta: ca.SX, scene_structure: tuple[int, bool, bool]) -> tuple[Wrench, list[ca.SX]]:
+    def wrench(self, ctx: FlightContext, theta: ca.SX, scene_structure: tuple) -> tuple[Wrench, list[ca.SX]]:
         """Total wrench and each effect's force (zeros where an effect has nothing to act against)."""
         total = Wrench.zero()
         forces = []
@@ -108,19 +108,19 @@ class AeroModel:
         rotor_thrusts[4], mass, theta[param_size], scene[scene.vector_size])
         -> (force_world[3], moment_body[3], effect_forces_world[3 x n_effects])``
         """
+        return self.structure_function(rotor_positions_body, scene.structure, gravity)
+
+    def structure_function(self, rotor_positions_body: np.ndarray, scene_structure: tuple,
+                           gravity: float = GRAVITY) -> ca.Function:
+        """:meth:`function` for a scene structure (:class:`~wall_env.scene.SceneStructure`) instead of a scene."""
         rotors = tuple(map(tuple, np.asarray(rotor_positions_body, dtype=float)))
-        return _wrench_function(self.structure_key, rotors, scene.structure, float(gravity))
+        return _wrench_function(self.structure_key, rotors, tuple(scene_structure), float(gravity))
 
 
-def symbolic_scene(structure: tuple[int, bool, bool]) -> tuple[Any, ca.SX]:
-    """Scene symbols for a structure (wall count, has ground, has ceiling)."""
-    n_walls, has_ground, has_ceiling = structure
-    placeholder = Scene(
-        walls=tuple(Wall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)) for _ in range(n_walls)),
-        ground_z=0.0 if has_ground else None,
-        ceiling_z=10.0 if has_ceiling else None,
-    )
-    return placeholder.symbols()
+def symbolic_scene(structure: tuple) -> tuple[SceneSymbols, ca.SX]:
+    """Scene symbols for a structure (:class:`~wall_env.scene.SceneStructure`: wall count, has ground, has
+    ceiling, local surface slots per rotor)."""
+    return scene_symbols(structure)
 
 
 @lru_cache(maxsize=64)
@@ -145,3 +145,34 @@ def _wrench_function(structure_key: tuple, rotors: tuple, scene_structure: tuple
         ["p_world", "R_body_to_world", "v_world", "omega_body", "rotor_thrusts", "mass", "theta", "scene"],
         ["force_world", "moment_body", "effect_forces_world"],
     )
+
+
+def rotor_suction_function(model: AeroModel, rotor_positions_body: np.ndarray, scene_structure: tuple,
+                           gravity: float = GRAVITY) -> ca.Function | None:
+    """Each rotor's force of the model's ``wall_suction`` (None without one):
+    ``rotor_suction(p_world[3], R_body_to_world[3x3], v_world[3], omega_body[3], rotor_thrusts[4], mass, theta,
+    scene) -> rotor_forces_world[3x4]``, from the effect's own definition."""
+    if model.get("wall_suction") is None:
+        return None
+    rotors = tuple(map(tuple, np.asarray(rotor_positions_body, dtype=float)))
+    return _rotor_suction_function(model.structure_key, rotors, tuple(scene_structure), float(gravity))
+
+
+@lru_cache(maxsize=16)
+def _rotor_suction_function(structure_key: tuple, rotors: tuple, scene_structure: tuple, gravity: float
+                            ) -> ca.Function:
+    model = AeroModel([make_effect(name, **dict(options)) for name, options in structure_key])
+    p, v, omega = ca.SX.sym("p_world", 3), ca.SX.sym("v_world", 3), ca.SX.sym("omega_body", 3)
+    R = ca.SX.sym("R_body_to_world", 3, 3)
+    thrusts, mass = ca.SX.sym("rotor_thrusts", 4), ca.SX.sym("mass")
+    theta = ca.SX.sym("theta", model.param_size)
+    symbols, scene_vector = symbolic_scene(scene_structure)
+    ctx = FlightContext(p, R, v, omega, thrusts, np.asarray(rotors), mass, gravity, symbols)
+    index = model.names.index("wall_suction")
+    suction = model.effects[index]
+    forces = suction.rotor_forces(ctx, suction.unpack(theta[model.slices()[index]]))  # type: ignore[attr-defined]
+    if not suction.applies_to(scene_structure):
+        forces = [ca.SX.zeros(3) for _ in forces]
+    return ca.Function("rotor_suction", [p, R, v, omega, thrusts, mass, theta, scene_vector], [ca.horzcat(*forces)],
+                       ["p_world", "R_body_to_world", "v_world", "omega_body", "rotor_thrusts", "mass", "theta",
+                        "scene"], ["rotor_forces_world"])

@@ -17,6 +17,14 @@ observation is built from the estimated state: the state the observation delay m
 stale, with the state-estimate error on top. The reward, the termination and ``info``
 are of the true state. In ideal conditions none of this runs.
 
+A scene with bodies (boxes, cylinders, meshes: :mod:`wall_env.bodies`) adds PyBullet's
+queries (:mod:`wall_env.surfaces`) around the compiled step: at each reset and after each
+step, every row's rotors get their local surfaces (written into the row's scene vector,
+which the compiled step's suction reads over the next step), and a row that some probe
+has near a surface gets a contact query; a contact is answered with the planes' response
+(:func:`wall_env.contact.respond`). Observation and info then count the bodies as walls:
+a rotor's clearance is its distance to the nearest plane or body surface.
+
 Random draws of an episode, per row and in this order: at reset, one uniform per
 randomised setting (:data:`~wall_env.config.RANDOMIZABLE` order, those configured; a push
 takes one more for its direction) and nine for the start perturbation (position,
@@ -35,7 +43,7 @@ import numpy as np
 from wall_env.conditions import DelayLine, SensingErrors, TurbulenceState
 from wall_env.conditions.latency import split_delay
 from wall_env.config import DRAG_EFFECTS, EnvConfig
-from wall_env.contact import SURFACES
+from wall_env.contact import SURFACES, respond
 from wall_env.dynamics import STATE_SIZE, BatchSimulator, StateIndex, Timing
 from wall_env.motor_lag import MIN_LAG_STEPS
 from wall_env.observation import CLEARANCE_CAP, OBSERVATION_FIELDS, OBSERVATION_SIZE, PREVIEW_STEPS
@@ -121,6 +129,16 @@ class EnvBatch:
         planes = ["wall"] * self._n_walls + (["ground"] if cfg.base_scene.ground_z is not None else []) \
             + (["ceiling"] if cfg.base_scene.ceiling_z is not None else [])
         self._plane_codes = np.array([1 + SURFACES.index(p) for p in planes], dtype=np.int64)
+        # a scene with bodies: PyBullet answers where the surfaces near each rotor are (wall_env.surfaces)
+        self.surfaces: Any = None
+        self._surface_columns = scene.surfaces_slice
+        if scene.has_bodies:
+            from wall_env.surfaces import SurfaceQuery
+
+            self.surfaces = SurfaceQuery(scene, cfg.vehicle, cfg.surface_reach)
+        self.surface_distance = np.full((n, 4), np.inf)  # each rotor's distance to its nearest body surface
+        self.surface_normal = np.zeros((n, 4, 3))  # that surface's outward normal
+        self.surface_contact = np.zeros(n, dtype=bool)  # a contact with a body in the latest step
         self._noise_std = cfg.noise_std
         self._mapping = cfg.action_mapping
 
@@ -132,6 +150,7 @@ class EnvBatch:
         self.surface = np.zeros(n, dtype=np.int64)  # 0: none, else 1 + index in SURFACES
         self.strayed = np.zeros(n, dtype=bool)
         self.forces = np.zeros_like(sim.forces)
+        self.rotor_suction = np.zeros_like(sim.rotor_suction)  # column-major 3 x 4 per row
         self.R = np.zeros((n, 9))  # column-major per row, of the current state
         self.distances = np.zeros((n, 4 * self._n_walls))  # column-major (n_walls x 4) per row
         self.ref_offset = np.zeros((n, 3))
@@ -167,6 +186,8 @@ class EnvBatch:
         self.x_estimate = self.simulator.x if self.ideal_observation else np.zeros((n, STATE_SIZE))
         self.R_estimate = self.R if self.ideal_observation else np.zeros((n, 9))
         self.distances_estimate = self.distances if self.ideal_observation else np.zeros((n, 4 * self._n_walls))
+        self.surface_distance_estimate = self.surface_distance if self.ideal_observation else np.full((n, 4), np.inf)
+        self.surface_normal_estimate = self.surface_normal if self.ideal_observation else np.zeros((n, 4, 3))
 
     def _set_delays(self, rows: np.ndarray | slice) -> None:
         """The compiled step's command switch and observation sample for the delays of ``rows``."""
@@ -199,6 +220,53 @@ class EnvBatch:
         x_est = SensingErrors.apply(x_seen, self._sensing.error[rows]) if self._sensing is not None else x_seen
         self.x_estimate[rows] = x_est
         self.R_estimate[rows], self.distances_estimate[rows] = self._geometry(x_est, self.simulator.scene[rows])
+        if self.surfaces is not None:  # what the estimate shows of the bodies: a query at the estimated pose
+            found = self.surfaces.rotor_surfaces(x_est[:, StateIndex.p_world], x_est[:, StateIndex.q_body_to_world],
+                                                 np.zeros((x_est.shape[0], self._surface_columns.stop
+                                                           - self._surface_columns.start)))
+            self.surface_distance_estimate[rows] = found.distance
+            self.surface_normal_estimate[rows] = found.normal
+
+    def _query_surfaces(self, rows: np.ndarray | slice) -> Any:
+        """Each rotor's local surfaces of ``rows`` at their current state, into their scene vectors (what the
+        compiled step's suction reads over the next step)."""
+        sim = self.simulator
+        x = sim.x[rows]
+        block = sim.scene[rows, self._surface_columns]
+        found = self.surfaces.rotor_surfaces(x[:, StateIndex.p_world], x[:, StateIndex.q_body_to_world], block)
+        sim.scene[rows, self._surface_columns] = block
+        self.surface_distance[rows] = found.distance
+        self.surface_normal[rows] = found.normal
+        return found
+
+    def _body_contacts(self, found: Any) -> None:
+        """Contacts with the bodies after a step: rows some probe has within reach of a surface are asked; the
+        deepest contact is answered with the planes' response until the vehicle is clear (at most four times),
+        and a row that moved gets its local surfaces again."""
+        sim, query = self.simulator, self.surfaces
+        self.surface_contact[:] = False
+        near = np.minimum(found.distance.min(axis=1), found.centre_distance) < query.contact_reach
+        for row in np.flatnonzero(near).tolist():
+            x = sim.x[row]
+            for _ in range(4):
+                contacts = query.contacts(x[StateIndex.p_world], x[StateIndex.q_body_to_world])
+                if not contacts:
+                    break
+                depth, normal = contacts[0]
+                x[StateIndex.p_world], x[StateIndex.v_world] = respond(
+                    x[StateIndex.p_world], x[StateIndex.v_world], normal, depth, sim.restitution[row, 0])
+                self.surface_contact[row] = True
+        moved = np.flatnonzero(self.surface_contact)
+        if len(moved):
+            self._query_surfaces(moved)
+            self.R[moved], self.distances[moved] = self._geometry(sim.x[moved], sim.scene[moved])
+            ends = moved[sim.timing[moved, Timing.observe_after] >= self.config.physics_substeps]
+            sim.x_observed[ends] = sim.x[ends]  # an observation of the step's end sees the response
+
+    def close(self) -> None:
+        """Let go of the PyBullet client of the surface queries (a scene with bodies)."""
+        if self.surfaces is not None:
+            self.surfaces.close()
 
     # ------------------------------------------------------------------ reset
     def reset(self, rows: np.ndarray | slice, spread: np.ndarray | float = 1.0) -> None:
@@ -261,6 +329,9 @@ class EnvBatch:
         x[:, StateIndex.rotor_thrusts] = np.reshape(mass * (GRAVITY / 4.0), (-1, 1))
         sim.x[rows] = x
         self.R[rows], self.distances[rows] = self._geometry(x, sim.scene[rows])
+        if self.surfaces is not None:
+            self._query_surfaces(rows)
+            self.surface_contact[rows] = False
         self.step_index[rows] = 0
         self.previous_action[rows] = 0.0
         self.collisions[rows] = 0
@@ -268,6 +339,7 @@ class EnvBatch:
         self.surface[rows] = 0
         self.strayed[rows] = False
         self.forces[rows] = 0.0
+        self.rotor_suction[rows] = 0.0
         self._reset_conditions(rows, x, sample)
 
     def _reset_conditions(self, rows: np.ndarray | slice, x: np.ndarray, sample: dict[str, np.ndarray]) -> None:
@@ -322,6 +394,9 @@ class EnvBatch:
         self.R[:] = sim.R
         self.distances[:] = sim.distances
         self.forces[:] = sim.forces
+        self.rotor_suction[:] = sim.rotor_suction
+        if self.surfaces is not None:
+            self._body_contacts(self._query_surfaces(slice(None)))
         self.command[:] = command
         self.step_index += 1
         if not self.ideal_observation:
@@ -338,6 +413,9 @@ class EnvBatch:
         contact = touching.any(axis=1)
         self.surface[:] = np.where(contact, self._plane_codes[np.argmax(touching, axis=1)] if touching.shape[1]
                                    else 0, 0)
+        if self.surfaces is not None:
+            self.surface[self.surface_contact & ~contact] = 1 + SURFACES.index("structure")
+            contact |= self.surface_contact
         self.collisions += contact
 
         x = sim.x
@@ -376,7 +454,13 @@ class EnvBatch:
         obs[:, f["p_error"]] = x[:, StateIndex.p_world] - (ref[:, 0:3] + self.ref_offset[rows])
         obs[:, f["v_error"]] = x[:, StateIndex.v_world] - ref[:, 3:6]
         obs[:, f["reference_preview"]] = ref[:, 6:]
-        if self._n_walls:
+        if self.surfaces is not None:  # planes and bodies: each rotor's nearest of all
+            clearance, normal = self._clearance(self.distances_estimate[rows], self.surface_distance_estimate[rows],
+                                                self.surface_normal_estimate[rows], self.simulator.scene[rows])
+            # a rotor with no surface within the query's reach reads the reach
+            obs[:, f["rotor_clearance"]] = np.minimum(clearance, min(self.surfaces.reach, CLEARANCE_CAP))
+            obs[:, f["wall_normal"]] = normal
+        elif self._n_walls:
             if self._n_walls == 1:
                 obs[:, f["rotor_clearance"]] = np.minimum(self.distances_estimate[rows], CLEARANCE_CAP)
                 obs[:, f["wall_normal"]] = self.simulator.scene[rows, 3:6]
@@ -393,6 +477,23 @@ class EnvBatch:
         obs[:, OBSERVATION_FIELDS["time"].start] = i * self.config.control_dt
         return obs
 
+    def _clearance(self, plane_distances: np.ndarray, surface_distance: np.ndarray, surface_normal: np.ndarray,
+                   scene: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each rotor's distance to its nearest plane or body surface ``(k, 4)`` (``inf`` where neither is known:
+        no wall, and no body within the query's reach) and the outward normal of the surface nearest to any
+        rotor ``(k, 3)`` (zeros where none is known)."""
+        k = surface_distance.shape[0]
+        d = surface_distance.copy()
+        normal = surface_normal.copy()
+        if self._n_walls:
+            planes = plane_distances.reshape(k, 4, self._n_walls)  # [row, rotor, wall]
+            nearest_wall = np.argmin(planes, axis=2)
+            closer = planes.min(axis=2) < d
+            wall_normals = scene[:, : 6 * self._n_walls].reshape(k, self._n_walls, 2, 3)[:, :, 1]
+            normal = np.where(closer[:, :, None], wall_normals[np.arange(k)[:, None], nearest_wall], normal)
+            d = np.where(closer, planes.min(axis=2), d)
+        return d, normal[np.arange(k), np.argmin(d, axis=1)]
+
     def infos(self) -> dict[str, Any]:
         """The info of every row as arrays (keys: see :mod:`wall_env.env`)."""
         x = self.simulator.x.copy()  # one copy: the state entries below are views of it
@@ -400,7 +501,11 @@ class EnvBatch:
         n = self.n
         forces = self.forces.reshape(n, -1, 3).copy()  # [row, effect, axis]
         suction = forces[:, self._suction_index] if self._suction_index is not None else np.zeros((n, 3))
-        if self._n_walls:
+        if self.surfaces is not None:
+            nearest = self._clearance(self.distances, self.surface_distance, self.surface_normal,
+                                      self.simulator.scene)[0]
+            clearance = nearest.min(axis=1) - self.config.vehicle.duct_radius
+        elif self._n_walls:
             clearance = self.distances.min(axis=1) - self.config.vehicle.duct_radius
         else:
             clearance = np.full(n, np.inf)
@@ -414,6 +519,7 @@ class EnvBatch:
             "p_ref": self._ref_p[i] + self.ref_offset,
             "v_ref": self._ref_v[i],
             "suction_force_world": suction,
+            "rotor_suction_world": self.rotor_suction.reshape(n, 4, 3).copy(),
             "effect_forces_world": {name: forces[:, k] for k, name in enumerate(self._effect_names)},
             "collision": self.surface > 0,
             "collision_surface": _NO_SURFACE[self.surface],

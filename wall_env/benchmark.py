@@ -90,6 +90,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--memory-resets", type=int, default=1000,
                         help="--batched: resets of a 1,024-env batch for the memory check, 0 = skip (default 1000)")
     parser.add_argument("--plot", metavar="FILE", help="--batched: write the scaling curve as a picture (PNG)")
+    parser.add_argument("--geometry-n", type=int, default=256,
+                        help="--batched: vehicles of the structure tasks (Facade, Pier: suction and contact from "
+                             "PyBullet's geometry) measured beside the plane-only task at the same N, 0 = skip "
+                             "(default 256)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -110,8 +114,10 @@ def run(args: argparse.Namespace) -> int:
     if args.plot and not args.batched:
         raise SystemExit("--plot draws the batched env's scaling curve: use it with --batched")
     if args.batched:
-        if any(n < 1 for n in args.sizes) or args.batched_steps < 1 or args.two_core_n < 0 or args.memory_resets < 0:
-            raise SystemExit("--sizes and --batched-steps must be positive, --two-core-n and --memory-resets >= 0")
+        if any(n < 1 for n in args.sizes) or args.batched_steps < 1 or args.two_core_n < 0 or args.memory_resets < 0 \
+                or args.geometry_n < 0:
+            raise SystemExit("--sizes and --batched-steps must be positive, --two-core-n, --memory-resets and "
+                             "--geometry-n >= 0")
         from wall_env.benchmark_batched import run_batched
 
         return run_batched(args)

@@ -10,12 +10,16 @@ one run:
 * the time to reset all N envs (median, and per 1,000 envs);
 * two processes each stepping one batched env of ``--two-core-n`` vehicles at the same
   time (env steps of both over the wall time of the slower);
-* the resident memory before and after ``--memory-resets`` resets of a batch of 1,024.
+* the resident memory before and after ``--memory-resets`` resets of a batch of 1,024;
+* the structure tasks (``Facade-v0``, ``Pier-v0``: suction and contact from PyBullet's queries on
+  the scene's bodies, :mod:`wall_env.surfaces`) at N = ``--geometry-n`` (256), each beside the
+  plane-only task at the same N, the three measured in turn twice in the same run (the
+  better of each pair is reported, so a burst of other work on a shared machine hurts all alike).
 
 Targets: >= 100,000 steps/s at N = 1024 in one process and >= 20x the
-single env; >= 200,000 with two processes; reset <= 1 ms per 1,000 envs. The
-table goes to the terminal (and ``--markdown``), the figures to ``--json`` and the
-scaling curve to ``--plot``.
+single env; >= 200,000 with two processes; reset <= 1 ms per 1,000 envs; >= 20,000
+steps/s for ``Facade-v0`` at N = 256. The table goes to the terminal (and ``--markdown``),
+the figures to ``--json`` and the scaling curve to ``--plot``.
 """
 
 from __future__ import annotations
@@ -37,6 +41,8 @@ TARGET_BATCHED = 100_000.0
 TARGET_RATIO = 20.0
 TARGET_TWO_CORES = 200_000.0
 TARGET_RESET_MS_PER_1000 = 1.0
+TARGET_FACADE = 20_000.0  # env steps/s of the batched Facade-v0 at N = 256
+GEOMETRY_TASKS = ("WallInspector/Facade-v0", "WallInspector/Pier-v0")
 
 
 def _make(env_id: str, n: int):
@@ -124,6 +130,18 @@ def measure_two_processes(env_id: str, n: int, min_steps: int, processes: int = 
             "steps_per_s": processes * calls * n / wall}
 
 
+def measure_geometry(plane_env_id: str, n: int, min_steps: int, repeats: int = 2) -> list[dict[str, Any]]:
+    """The structure tasks and the plane-only task at ``n`` vehicles, measured in turn ``repeats`` times;
+    the better figure of each."""
+    best: dict[str, dict[str, Any]] = {}
+    for _ in range(repeats):
+        for env_id in (plane_env_id, *GEOMETRY_TASKS):
+            row = measure_batched(env_id, n, min_steps)
+            if env_id not in best or row["steps_per_s"] > best[env_id]["steps_per_s"]:
+                best[env_id] = {"env_id": env_id, **row}
+    return list(best.values())
+
+
 def _rss_mb() -> float:
     with open("/proc/self/statm") as fh:
         return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
@@ -183,6 +201,12 @@ def run_batched(args) -> int:
     if memory:
         print(f"memory over {memory['resets']} resets of a 1,024-env batch: {memory['rss_before_mb']:.1f} MB -> "
               f"{memory['rss_after_mb']:.1f} MB ({memory['growth_mb']:+.1f} MB)")
+    geometry = measure_geometry(env_id, args.geometry_n, min(args.batched_steps, 100_000)) if args.geometry_n else []
+    if geometry:
+        print(f"\nstructures (PyBullet's geometry) beside planes, N = {args.geometry_n}:")
+        for row in geometry:
+            print(f"  {row['env_id']:28s} {row['steps_per_s']:10,.0f} env steps/s {row['steps_per_cpu_s']:10,.0f} "
+                  f"per CPU-second")
     load_end = _load()
     print(f"load average at end: {load_end}")
 
@@ -201,6 +225,10 @@ def run_batched(args) -> int:
     if worst_reset is not None:
         checks[f"reset <= {TARGET_RESET_MS_PER_1000} ms per 1,000 envs (N >= 1024)"] = (
             worst_reset, worst_reset <= TARGET_RESET_MS_PER_1000)
+    facade = next((r for r in geometry if r["env_id"] == GEOMETRY_TASKS[0]), None)
+    if facade is not None and facade["n"] == 256:
+        checks[f">= {TARGET_FACADE:,.0f} steps/s for Facade-v0 at N = 256"] = (facade["steps_per_s"],
+                                                                            facade["steps_per_s"] >= TARGET_FACADE)
     print()
     for name, (value, ok) in checks.items():
         print(f"{'met    ' if ok else 'NOT met'}  {name}: {value:,.3f}")
@@ -217,6 +245,13 @@ def run_batched(args) -> int:
                           f"{two['steps_per_s']:,.0f} env steps/s."]
         lines += ["", f"`{env_id}`, random actions, resets included, measured by `wall-inspector bench-env --batched` "
                       f"on {os.cpu_count()} cores (load average {load_start} at start)."]
+        if geometry:
+            lines += ["", f"| structure, N = {args.geometry_n:,} | env steps/s (1 process) | env steps per CPU-second |",
+                      "|---|---:|---:|",
+                      *[f"| `{r['env_id']}`{' (planes only)' if r['env_id'] == env_id else ''} | "
+                        f"{r['steps_per_s']:,.0f} | {r['steps_per_cpu_s']:,.0f} |" for r in geometry],
+                      "", "Measured in turn twice in the same run, the better of each; the structures' suction and "
+                      "contact come from PyBullet's closest-point queries on their bodies."]
         with open(args.markdown, "w") as fh:
             fh.write("\n".join(lines) + "\n")
         print(f"wrote {args.markdown}")
@@ -252,6 +287,7 @@ def run_batched(args) -> int:
             "batched": rows,
             "two_processes": two,
             "memory": memory,
+            "geometry": geometry,
             "checks": {name: {"value": value, "met": ok} for name, (value, ok) in checks.items()},
         }
         with open(args.json, "w") as fh:

@@ -1,57 +1,30 @@
 """The PyBullet side of the simulator: scene bodies, pictures and a contact query.
 
-PyBullet holds the walls, the ground, an optional ceiling and the vehicle's collision
-geometry (four ducts as cylinders around the rotor centres plus the central body, the
-shapes of :func:`wall_env.contact.collision_shapes`). The envs place the vehicle at the
-integrated state for pictures (PyBullet's CPU renderer, no display needed) and the
-human viewer. Contact during flight is computed in closed form by :mod:`wall_env.contact`
-(the same code for one vehicle and for a batch); :meth:`BulletWorld.contacts` remains
-as an independent check of that geometry.
+PyBullet holds the walls, the ground, an optional ceiling, the scene's bodies (boxes,
+cylinders, meshes, URDF models: :func:`wall_env.surfaces.add_bodies`, as the envs' distance
+queries load them) and the vehicle's collision geometry (four ducts as cylinders around
+the rotor centres plus the central body, the shapes of
+:func:`wall_env.contact.collision_shapes`). The envs place the vehicle at the integrated
+state for pictures (PyBullet's CPU renderer, no display needed) and the human viewer.
+Contact with planes during flight is computed in closed form by :mod:`wall_env.contact`
+(the same code for one vehicle and for a batch), contact with bodies by the envs' own
+PyBullet query (:mod:`wall_env.surfaces`); :meth:`BulletWorld.contacts` remains as an
+independent check of that geometry.
 """
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import os
-import sys
-from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-
-@contextlib.contextmanager
-def _quiet_native_output() -> Iterator[None]:
-    """Silence what PyBullet's C code prints on import and connect (build time, argv)."""
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        saved = [os.dup(1), os.dup(2)]
-    except (OSError, ValueError):  # no real file descriptors (some notebook kernels): nothing to silence
-        yield
-        return
-    try:
-        with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), 1)
-            os.dup2(devnull.fileno(), 2)
-            yield
-            ctypes.CDLL(None).fflush(None)  # C stdio buffers, or the text would appear at exit
-    finally:
-        for fd, copy in zip((1, 2), saved):
-            os.dup2(copy, fd)
-            os.close(copy)
-
-
-with _quiet_native_output():
-    import pybullet
-    from pybullet_utils.bullet_client import BulletClient
-
-from wall_env.contact import collision_shapes  # noqa: E402 - after the quietened PyBullet import above
-from wall_env.scene import Scene  # noqa: E402
-from wall_env.vehicle import VehicleParams  # noqa: E402
+from wall_env.contact import collision_shapes
+from wall_env.pybullet_client import connect, pybullet
+from wall_env.scene import Scene
+from wall_env.vehicle import VehicleParams
 
 __all__ = ["BulletWorld", "Contact"]
 
@@ -92,12 +65,12 @@ class BulletWorld:
         self._client: Any = None
         if gui and not os.environ.get("DISPLAY"):
             raise ValueError("render_mode='human' needs a display (DISPLAY is not set); use render_mode='rgb_array'")
-        with _quiet_native_output():
-            self._client = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
+        self._client = connect(gui)
         self.client_id = self._client._client
         self.vehicle = vehicle
         self.scene = scene
         self._surface_of_body: dict[int, str] = {}
+        self._bodies: list[int] = []
         self._build_scene(scene)
         self.vehicle_id = self._build_vehicle(vehicle)
         self._markers: list[int] = []
@@ -130,6 +103,11 @@ class BulletWorld:
         if scene.ceiling_z is not None:
             self._plane(np.array([0.0, 0.0, scene.ceiling_z]), np.array([0.0, 0.0, -1.0]), (6.0, 6.0),
                         _WALL_COLOUR, "ceiling")
+        from wall_env.surfaces import add_bodies
+
+        self._bodies = add_bodies(self.client_id, scene.bodies, visual=True)
+        for body in self._bodies:
+            self._surface_of_body[body] = "structure"
 
     def _build_vehicle(self, vehicle: VehicleParams) -> int:
         bc = self._client
@@ -185,6 +163,12 @@ class BulletWorld:
         vehicle looking along a corridor (walls whose normals cancel); ``distance`` scales how far."""
         up = np.array([0.0, 0.0, 1.0])
         normals = [np.asarray(w.normal) for w in self.scene.walls]
+        if not normals and self._bodies:  # in front of the nearest body surface, beside the vehicle, farther back
+            normal = self._nearest_body_normal(target)
+            if normal is not None and abs(normal[2]) < 0.9:
+                n = (normal - normal[2] * up) / np.linalg.norm(normal - normal[2] * up)
+                along = np.cross(up, n)
+                return target + distance * (1.4 * n + 1.5 * along + 0.6 * up)
         if not normals:
             return target + distance * np.array([-1.2, -1.2, 0.5])
         total = np.sum(normals, axis=0)
@@ -194,6 +178,18 @@ class BulletWorld:
             return target + distance * (0.6 * n + 1.1 * along + 0.25 * up)
         along = np.cross(normals[0], up)
         return target + distance * (-1.3 * along / np.linalg.norm(along) + 0.3 * up)
+
+    def _nearest_body_normal(self, point: np.ndarray, reach: float = 5.0) -> np.ndarray | None:
+        """The outward normal of the body surface nearest to ``point`` (within ``reach`` m), or None."""
+        bc = self._client
+        probe = bc.createCollisionShape(pybullet.GEOM_SPHERE, radius=1e-3)
+        best: tuple[float, np.ndarray] | None = None
+        for body in self._bodies:
+            for pt in bc.getClosestPoints(-1, body, reach, collisionShapeA=probe,
+                                          collisionShapePositionA=[float(v) for v in point]):
+                if best is None or pt[8] < best[0]:
+                    best = (pt[8], np.asarray(pt[7], dtype=float))
+        return None if best is None else best[1]
 
     def render(self, target: np.ndarray, width: int = 480, height: int = 360, distance: float = 1.0) -> np.ndarray:
         """An RGB picture ``(height, width, 3)`` looking at ``target`` from :meth:`camera_eye`."""

@@ -155,6 +155,7 @@ class EnvConfig:
     min_standoff: float
     geometry: StandoffGeometry = field(repr=False)
     conditions: FlightConditions = field(default_factory=FlightConditions)
+    user_scene: Scene | None = None  # the ``scene`` keyword: walls and bodies instead of the task's
 
     @classmethod
     def from_kwargs(
@@ -185,6 +186,7 @@ class EnvConfig:
         conditions: Any = None,
         ground_z: float | None = 0.0,
         ceiling_z: float | None = None,
+        scene: Scene | dict[str, Any] | str | Path | None = None,
         render_mode: str | None = None,
         render_size: tuple[int, int] = (480, 360),
     ) -> EnvConfig:
@@ -250,7 +252,7 @@ class EnvConfig:
             if model is None:
                 raise
             raise ValueError(f"{exc}; {flight_model.behind_standoff(spec.wall_axis, spec.closest_approach)}") from None
-        altitude = check_range("altitude", spec.altitude if altitude is None else altitude, 0.1, 100.0)
+        altitude = check_range("altitude", spec.altitude if altitude is None else altitude, *spec.altitude_range)
         duration = check_range("duration", spec.duration if duration is None else duration, 0.05, 3600.0)
         if round(duration / control_dt) > MAX_EPISODE_STEPS:
             raise ValueError(f"duration / control_dt must be at most {MAX_EPISODE_STEPS:,} steps, "
@@ -259,6 +261,7 @@ class EnvConfig:
             ground_z = check_range("ground_z", ground_z, -100.0, altitude - 0.3)
         if ceiling_z is not None:
             ceiling_z = check_range("ceiling_z", ceiling_z, altitude + 0.1, 1000.0)
+        user_scene = _load_scene(scene, ground_z, ceiling_z)
         base_scene = Scene((), ground_z, ceiling_z)
         params = spec.check_params(task_params)
         truth = _with_conditions(truth, flight_conditions, push=isinstance(randomize, dict) and "push" in randomize)
@@ -269,7 +272,8 @@ class EnvConfig:
         if any(0 < tau < MIN_LAG_STEPS * physics_dt for tau in lags):
             raise ValueError(f"motor_time_constant must be 0 or at least one physics step, {physics_dt * 1e3:g} ms "
                              f"(control_dt / physics_substeps), got {min(t for t in lags if t > 0) * 1e3:g} ms")
-        geometry = _standoff_geometry(spec, standoff, altitude, duration, base_scene, params, control_dt)
+        geometry = _standoff_geometry(spec, standoff, altitude, duration, base_scene, params, control_dt,
+                                      randomized="standoff" in ranges, user_scene=user_scene)
 
         return cls(
             task=spec, vehicle=vehicle_params, truth=truth, nominal_model=nominal_aero_model(vehicle_params),
@@ -282,7 +286,7 @@ class EnvConfig:
             reward_weights=weights, standoff=standoff, altitude=altitude, duration=duration,
             base_scene=base_scene, task_params=params, randomize=ranges, render_mode=render_mode,
             render_size=(width, height),
-            min_standoff=lowest, geometry=geometry, conditions=flight_conditions,
+            min_standoff=lowest, geometry=geometry, conditions=flight_conditions, user_scene=user_scene,
         )
 
     # ------------------------------------------------------------------ derived
@@ -298,8 +302,20 @@ class EnvConfig:
 
     def build(self, standoff: float | None = None) -> tuple[Scene, Reference]:
         """Scene and reference for ``standoff`` (default: the configured one)."""
-        return self.task.scene_and_reference(self.standoff if standoff is None else standoff, self.altitude,
-                                             self.duration, self.base_scene, self.task_params)
+        return _scene_and_reference(self.task, self.standoff if standoff is None else standoff, self.altitude,
+                                    self.duration, self.base_scene, self.task_params, self.user_scene)
+
+    @property
+    def surface_reach(self) -> float:
+        """How far (m) from a rotor the scene's bodies are queried for its local surfaces
+        (:mod:`wall_env.surfaces`): the largest suction threshold an episode can have, plus what a vehicle
+        moves in a step (:data:`~wall_env.surfaces.REACH_MARGIN`)."""
+        from wall_env.surfaces import REACH_MARGIN
+
+        suction = self.truth.get("wall_suction")
+        d_thr = float(suction.values["d_thr"][0]) if suction is not None else 0.0
+        d_thr = max(d_thr, self.randomize.get("d_thr", (0.0, 0.0))[1])
+        return d_thr + REACH_MARGIN
 
     @property
     def suction_columns(self) -> dict[str, int]:
@@ -391,25 +407,58 @@ def _check_randomize(ranges: Any, truth: AeroModel, vehicle: VehicleParams,
     return checked
 
 
+def _load_scene(scene: Any, ground_z: float | None, ceiling_z: float | None) -> Scene | None:
+    """The ``scene`` keyword as a :class:`Scene` (a scene, its dict or a scene file), its ground and ceiling
+    checked against ``ground_z`` and ``ceiling_z``."""
+    if scene is None:
+        return None
+    if isinstance(scene, Scene):
+        loaded = scene
+    elif isinstance(scene, dict):
+        loaded = Scene.from_dict(scene)
+    elif isinstance(scene, (str, Path)):
+        loaded = Scene.from_file(scene)
+    else:
+        raise ValueError(f"scene must be a wall_env.Scene, a dict or a scene file (.yaml/.json), got {scene!r}")
+    if loaded.ground_z != ground_z or loaded.ceiling_z != ceiling_z:
+        raise ValueError(f"scene has ground_z={loaded.ground_z}, ceiling_z={loaded.ceiling_z} but the env's "
+                         f"ground_z={ground_z}, ceiling_z={ceiling_z}; give the same to both (the keywords set the "
+                         "ground and ceiling)")
+    return loaded
+
+
+def _scene_and_reference(spec: TaskSpec, standoff: float, altitude: float, duration: float, base: Scene,
+                         params: dict[str, float], user_scene: Scene | None) -> tuple[Scene, Reference]:
+    """The task's scene and reference; with a ``scene`` keyword, its walls and bodies replace the task's."""
+    scene, reference = spec.scene_and_reference(standoff, altitude, duration, base, params)
+    if user_scene is not None:
+        scene = Scene(user_scene.walls, scene.ground_z, scene.ceiling_z, user_scene.bodies)
+    return scene, reference
+
+
 def _standoff_geometry(spec: TaskSpec, standoff: float, altitude: float, duration: float, base: Scene,
-                       params: dict[str, float], control_dt: float) -> StandoffGeometry:
-    """Sample the reference at the control rate and find how scene and reference shift with the
-    stand-off (checked to be affine with a third stand-off, so a task that is not fails loudly)."""
+                       params: dict[str, float], control_dt: float, randomized: bool = True,
+                       user_scene: Scene | None = None) -> StandoffGeometry:
+    """Sample the reference at the control rate and, when the stand-off is ``randomized``, find how scene and
+    reference shift with it (checked to be affine with a third stand-off, so a task that is not fails loudly)."""
     n = int(round(duration / control_dt)) + _preview_stride(control_dt) * PREVIEW_STEPS + 1
     times = np.arange(n) * control_dt
-    probe = (standoff, standoff + 0.1, standoff + 0.25)
-    built = [spec.scene_and_reference(s, altitude, duration, base, params) for s in probe]
+    probe = (standoff, standoff + 0.1, standoff + 0.25) if randomized else (standoff,)
+    built = [_scene_and_reference(spec, s, altitude, duration, base, params, user_scene) for s in probe]
     scenes = [scene.to_vector() for scene, _ in built]
     samples = [reference.sample(times)[:2] for _, reference in built]
+    p, v = samples[0]
+    if not randomized:
+        return StandoffGeometry(standoff, scenes[0], np.zeros_like(scenes[0]), p, v, np.zeros(3))
     scene_rate = (scenes[1] - scenes[0]) / 0.1
     p_rate = (samples[1][0][0] - samples[0][0][0]) / 0.1
     affine = (np.allclose(scenes[2], scenes[0] + 0.25 * scene_rate, atol=1e-9)
               and np.allclose(samples[2][0], samples[0][0] + 0.25 * p_rate, atol=1e-9)
-              and np.allclose(samples[1][1], samples[0][1], atol=1e-9))
+              and np.allclose(samples[1][1], samples[0][1], atol=1e-9)
+              and all(scene.bodies == built[0][0].bodies for scene, _ in built))
     if not affine:
-        raise ValueError(f"task {spec.name!r}: scene and reference must shift with the stand-off by a fixed "
-                         "direction for the envs to randomise it")
-    p, v = samples[0]
+        raise ValueError(f"randomize['standoff']: task {spec.name!r} cannot randomise it (its scene and reference "
+                         "must shift with the stand-off by a fixed direction, and its bodies stay in place)")
     return StandoffGeometry(standoff, scenes[0], scene_rate, p, v, p_rate)
 
 

@@ -19,6 +19,11 @@ along ``n`` by the penetration and its velocity into the plane is reflected with
 restitution ``e``: ``v <- v - (1 + e) min(n . v, 0) n``. Both envs use this response
 (it is part of the compiled control step, :func:`wall_env.dynamics.build_env_step_function`),
 so a vehicle of a batch and a single env bounce identically.
+
+Against a scene's bodies (boxes, cylinders, meshes) the penetration and its normal come
+from PyBullet's collision query (:meth:`wall_env.surfaces.SurfaceQuery.contacts`) after
+the compiled step, and :func:`respond` applies this same response (:func:`plane_response`,
+the one definition) to the deepest contact, until the vehicle is clear.
 """
 
 from __future__ import annotations
@@ -31,7 +36,8 @@ import numpy as np
 from wall_env.scene import SceneSymbols
 from wall_env.vehicle import VehicleParams
 
-__all__ = ["CollisionShapes", "collision_shapes", "scene_planes", "contact_response", "SURFACES"]
+__all__ = ["CollisionShapes", "collision_shapes", "scene_planes", "contact_response", "plane_response", "respond",
+           "SURFACES"]
 
 
 @dataclass(frozen=True)
@@ -66,7 +72,7 @@ def scene_planes(symbols: SceneSymbols) -> tuple[list[tuple[ca.SX, ca.SX]], list
     return planes, names
 
 
-SURFACES = ("wall", "ground", "ceiling")
+SURFACES = ("wall", "ground", "ceiling", "structure")  # structure: a body of the scene (wall_env.bodies)
 
 
 def _shape_distances(p: ca.SX, R: ca.SX, shapes: CollisionShapes, point, normal) -> list[ca.SX]:
@@ -95,9 +101,31 @@ def contact_response(p: ca.SX, R: ca.SX, v: ca.SX, symbols: SceneSymbols, shapes
         deepest = ca.mmin(ca.vertcat(*_shape_distances(p, R, shapes, point, normal)))
         depths.append(ca.fmax(-deepest, 0.0))
     for (_, normal), depth in zip(planes, depths):
-        touching = depth > 0
-        p = p + depth * normal
-        v_n = ca.dot(v, normal)
-        v = v - ca.if_else(touching, (1.0 + restitution) * ca.fmin(v_n, 0.0), 0.0) * normal
+        p, v = plane_response(p, v, normal, depth, restitution)
     penetrations = ca.vertcat(*depths) if depths else ca.SX.zeros(0, 1)
     return p, v, penetrations
+
+
+def plane_response(p: ca.SX, v: ca.SX, normal: ca.SX, depth: ca.SX, restitution: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """The response to one contact of ``depth`` (m, 0 when clear) along the outward unit ``normal``: pushed out
+    by the depth, the velocity into the surface reflected with the restitution."""
+    touching = depth > 0
+    p = p + depth * normal
+    v_n = ca.dot(v, normal)
+    v = v - ca.if_else(touching, (1.0 + restitution) * ca.fmin(v_n, 0.0), 0.0) * normal
+    return p, v
+
+
+_RESPONSE: list[ca.Function] = []
+
+
+def respond(p_world: np.ndarray, v_world: np.ndarray, normal: np.ndarray, depth: float, restitution: float
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`plane_response` on numbers (a contact found by PyBullet): ``(p_world, v_world)`` after it."""
+    if not _RESPONSE:
+        p, v, n = ca.SX.sym("p", 3), ca.SX.sym("v", 3), ca.SX.sym("n", 3)
+        depth_sym, e = ca.SX.sym("depth"), ca.SX.sym("e")
+        _RESPONSE.append(ca.Function("plane_response", [p, v, n, depth_sym, e],
+                                     list(plane_response(p, v, n, depth_sym, e))))
+    p_after, v_after = _RESPONSE[0](p_world, v_world, normal, depth, restitution)
+    return np.asarray(p_after).reshape(3), np.asarray(v_after).reshape(3)

@@ -98,6 +98,13 @@ def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structu
 
     ctx = FlightContext(p, R, v, omega, f_act, vehicle.rotor_positions_array, mass, GRAVITY, scene_symbols)
     aero, effect_forces = model.wrench(ctx, theta, scene_structure)
+    suction = model.get("wall_suction")
+    if suction is not None and suction.applies_to(scene_structure):
+        index = model.names.index("wall_suction")
+        rotor_suction = ca.horzcat(*suction.rotor_forces(  # type: ignore[attr-defined]
+            ctx, suction.unpack(theta[model.slices()[index]])))
+    else:
+        rotor_suction = ca.SX.zeros(3, 4)
     allocation = ca.DM(vehicle.allocation_matrix)
     thrust = ca.sum1(f_act)
     moments = allocation[1:4, :] @ f_act
@@ -108,7 +115,8 @@ def _continuous_dynamics(vehicle: VehicleParams, model: AeroModel, scene_structu
     omega_dot = (moments + aero.moment_body - gyro) / J
     x_dot = ca.vertcat(p_dot, q_dot, v_dot, omega_dot, f_dot)
     forces = ca.horzcat(*effect_forces) if effect_forces else ca.SX.zeros(3, 0)
-    return ca.Function("flight_dynamics", [x, u, tau_m, mass, theta, scene_vector], [x_dot, forces, f_act])
+    return ca.Function("flight_dynamics", [x, u, tau_m, mass, theta, scene_vector],
+                       [x_dot, forces, f_act, rotor_suction])
 
 
 def _rk4_substep(dynamics: ca.Function, h: float, vehicle: VehicleParams, lagged: bool) -> ca.Function:
@@ -116,7 +124,7 @@ def _rk4_substep(dynamics: ca.Function, h: float, vehicle: VehicleParams, lagged
     u = ca.SX.sym("u", 4)
     args = [ca.SX.sym(dynamics.name_in(i), dynamics.sparsity_in(i)) for i in range(2, dynamics.n_in())]
     tau_m = args[0]
-    k1, forces, _ = dynamics(x, u, *args)
+    k1, forces, _, rotor_suction = dynamics(x, u, *args)
     k2 = dynamics(x + h / 2 * k1, u, *args)[0]
     k3 = dynamics(x + h / 2 * k2, u, *args)[0]
     k4 = dynamics(x + h * k3, u, *args)[0]
@@ -129,7 +137,7 @@ def _rk4_substep(dynamics: ca.Function, h: float, vehicle: VehicleParams, lagged
         x_next[StateIndex.rotor_thrusts] = ca.if_else(tau_m > 0, x_next[StateIndex.rotor_thrusts], algebraic)
     else:
         x_next[StateIndex.rotor_thrusts] = algebraic
-    return ca.Function("rk4_substep", [x, u, *args], [x_next, forces])
+    return ca.Function("rk4_substep", [x, u, *args], [x_next, forces, rotor_suction])
 
 
 @lru_cache(maxsize=32)
@@ -140,12 +148,13 @@ def build_step_function(
     """CasADi function of one control step.
 
     ``control_step(x[17], u[4], u_previous[4], timing[3], mass, theta, scene) -> (x_next[17],
-    effect_forces_mean[3 x n_effects], rotor_wall_distances[n_walls x 4], R_body_to_world[3x3], x_observed[17])``
+    effect_forces_mean[3 x n_effects], rotor_wall_distances[n_walls x 4], R_body_to_world[3x3], x_observed[17],
+    rotor_suction_mean[3 x 4])``
 
     ``timing`` as :class:`Timing`: substeps ``i < command_switch`` fly ``u_previous``, the others
     ``u``; ``x_observed`` is the state after ``observe_after`` substeps (0: the step's start);
     ``motor_time_constant`` is the rotor lag when ``lagged`` (built in: rotor thrusts are state).
-    The effect forces are averaged over the substeps; the rotor-wall distances are
+    The effect forces and each rotor's wall suction are averaged over the substeps; the rotor-wall distances are
     the signed distances of the rotor centres of ``x_next`` to each wall, and the
     rotation matrix is that of ``x_next``.
     ``vehicle`` enters with its mass and motor time constant ignored (both are inputs, so they
@@ -165,12 +174,14 @@ def build_step_function(
     theta = ca.MX.sym("theta", model.param_size)
     scene = ca.MX.sym("scene", dynamics.size1_in(5))
     forces_sum = ca.MX.zeros(3, len(model.effects))
+    suction_sum = ca.MX.zeros(3, 4)
     state = x
     observed = ca.if_else(timing[Timing.observe_after] < 0.5, x, ca.MX.zeros(STATE_SIZE))
     for i in range(substeps):
         u_i = ca.if_else(timing[Timing.command_switch] > i + 0.5, u_previous, u)
-        state, forces = substep(state, u_i, timing[Timing.motor_time_constant], mass, theta, scene)
+        state, forces, rotor_suction = substep(state, u_i, timing[Timing.motor_time_constant], mass, theta, scene)
         forces_sum += forces
+        suction_sum += rotor_suction
         observed += ca.if_else(ca.fabs(timing[Timing.observe_after] - (i + 1)) < 0.5, state, ca.MX.zeros(STATE_SIZE))
 
     # rotor-wall distances of the final state
@@ -188,9 +199,10 @@ def build_step_function(
     return ca.Function(
         "control_step",
         [x, u, u_previous, timing, mass, theta, scene],
-        [state, forces_sum / substeps, distances_next, R_next, observed],
+        [state, forces_sum / substeps, distances_next, R_next, observed, suction_sum / substeps],
         ["x", "u", "u_previous", "timing", "mass", "theta", "scene"],
-        ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world", "x_observed"],
+        ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world", "x_observed",
+         "rotor_suction_world"],
     )
 
 
@@ -204,7 +216,8 @@ def build_env_step_function(
 
     ``env_step(x[17], u[4], u_previous[4], timing[3], mass, theta, scene, restitution) -> (x_next[17],
     effect_forces_world[3 x n_effects], rotor_wall_distances[n_walls x 4], R_body_to_world[3x3],
-    penetrations[n_planes], x_observed[17])``: the state, distances and rotation after the response; the
+    penetrations[n_planes], x_observed[17], rotor_suction_world[3 x 4])``: the state, distances and rotation
+    after the response; the
     penetrations before it (one per plane: walls, ground, ceiling); ``x_observed`` as
     :func:`build_step_function` (after the response when it is the step's end state).
     """
@@ -229,15 +242,16 @@ def build_env_step_function(
     theta = ca.MX.sym("theta", step.size1_in(5))
     scene = ca.MX.sym("scene", step.size1_in(6))
     e = ca.MX.sym("restitution")
-    x_next, forces, _, R_next, observed = step(x, u, u_previous, timing, mass, theta, scene)
+    x_next, forces, _, R_next, observed, rotor_suction = step(x, u, u_previous, timing, mass, theta, scene)
     x_after_contact, distances_after, depth = respond(x_next, scene, e)
     observed = ca.if_else(timing[Timing.observe_after] > substeps - 0.5, x_after_contact, observed)
     return ca.Function(
         "env_step",
         [x, u, u_previous, timing, mass, theta, scene, e],
-        [x_after_contact, forces, distances_after, R_next, depth, observed],
+        [x_after_contact, forces, distances_after, R_next, depth, observed, rotor_suction],
         ["x", "u", "u_previous", "timing", "mass", "theta", "scene", "restitution"],
-        ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world", "penetrations", "x_observed"],
+        ["x_next", "effect_forces_world", "rotor_wall_distances", "R_body_to_world", "penetrations", "x_observed",
+         "rotor_suction_world"],
     )
 
 
@@ -254,7 +268,8 @@ class BatchSimulator:
     ``mass (n, 1)``, ``theta (n, P)``, ``scene (n, S)``, ``restitution (n, 1)``. :meth:`step` writes the
     outputs, also owned arrays: ``x_next (n, 17)``, ``forces (n, 3 * n_effects)`` (column-major
     ``3 x n_effects`` per row), ``distances (n, n_walls * 4)`` (column-major ``n_walls x 4``), ``R (n, 9)``
-    (column-major), ``penetrations (n, n_planes)`` and ``x_observed (n, 17)``. ``lagged``: rotor
+    (column-major), ``penetrations (n, n_planes)``, ``x_observed (n, 17)`` and ``rotor_suction (n, 12)``
+    (column-major ``3 x 4``: each rotor's wall suction, mean over the step). ``lagged``: rotor
     thrusts are state and follow each row's ``timing[:, Timing.motor_time_constant]`` (default: lagged
     when the vehicle has a motor time constant).
     """
@@ -273,10 +288,12 @@ class BatchSimulator:
          self.restitution) = (np.zeros((n, size)) for size in self._step.nnz_in)
         self.timing[:, Timing.observe_after] = substeps
         self.timing[:, Timing.motor_time_constant] = vehicle.motor_time_constant
-        self.x_next, self.forces, self.distances, self.R, self.penetrations, self.x_observed = self._step.outputs(n)
+        (self.x_next, self.forces, self.distances, self.R, self.penetrations, self.x_observed,
+         self.rotor_suction) = self._step.outputs(n)
         self._step.bind([self.x, self.u, self.u_previous, self.timing, self.mass, self.theta, self.scene,
                          self.restitution],
-                        [self.x_next, self.forces, self.distances, self.R, self.penetrations, self.x_observed])
+                        [self.x_next, self.forces, self.distances, self.R, self.penetrations, self.x_observed,
+                         self.rotor_suction])
 
     def step(self) -> None:
         """Advance every vehicle one control step (inputs and outputs: the arrays above)."""
@@ -321,7 +338,8 @@ class Simulator:
         Returns ``x_next``, the effect forces ``(3, n_effects)`` (mean over the step), the
         rotor-wall distances ``(n_walls, 4)`` and ``R_body_to_world`` ``(3, 3)`` of ``x_next``.
         """
-        x_next, forces, distances, R, _ = self._step(x, u, u, self._timing, self.mass, self.theta, self.scene_vector)
+        x_next, forces, distances, R, _, _ = self._step(x, u, u, self._timing, self.mass, self.theta,
+                                                         self.scene_vector)
         return (x_next, forces.reshape(3, -1, order="F"), distances.reshape(self.n_walls, 4, order="F"),
                 R.reshape(3, 3, order="F"))
 

@@ -23,7 +23,8 @@ Episode end
 Info
     true state (``p_world``, ``q_body_to_world`` [w, x, y, z], ``v_world``, ``omega_body``,
     ``rotor_thrusts``), reference (``p_ref``, ``v_ref``), ``suction_force_world`` (N,
-    mean over the step), ``effect_forces_world`` (per effect), ``collision`` (bool),
+    mean over the step), ``rotor_suction_world`` (``(4, 3)``, N: each rotor's share of it),
+    ``effect_forces_world`` (per effect), ``collision`` (bool),
     ``collision_surface``, ``collisions`` (count this episode), ``wall_clearance``
     (m, nearest duct edge to a wall), ``command`` (the noisy physical command), ``time``,
     ``strayed`` (bool).
@@ -229,6 +230,8 @@ class WallInspectorEnv(gym.Env):
         if self._world is not None:
             self._world.close()
             self._world = None
+        if hasattr(self, "_batch"):
+            self._batch.close()
         self._phase = "closed"
         super().close()
 

@@ -17,6 +17,12 @@ wall_normal         40-42      outward normal of the wall nearest to any rotor (
 previous_action     43-46      the normalised action of the previous step (zeros after reset)
 time                47         seconds since reset
 ==================  =========  ============================================================
+
+In a scene with bodies (:mod:`wall_env.bodies`) a body's surface counts as a wall: the
+clearance is the distance to the nearest wall plane or body surface (PyBullet's query,
+:mod:`wall_env.surfaces`), capped at the query's reach (``d_thr`` + 5 cm, see
+:attr:`wall_env.config.EnvConfig.surface_reach`) instead of 1 m, and the normal is that
+surface's.
 """
 
 from __future__ import annotations

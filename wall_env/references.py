@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Reference", "HoverReference", "CircleReference", "SweepReference", "CorridorReference"]
+__all__ = ["Reference", "HoverReference", "CircleReference", "SweepReference", "CorridorReference",
+           "WaypointReference"]
 
 
 def _vec(values) -> np.ndarray:
@@ -162,4 +163,41 @@ class CorridorReference(Reference):
         p = (self.speed * s)[:, None] * d + y[:, None] * lat
         v = (self.speed * ds)[:, None] * d + dy[:, None] * lat
         a = (self.speed * dds)[:, None] * d + ddy[:, None] * lat
+        return p, v, a
+
+
+@dataclass(frozen=True)
+class WaypointReference(Reference):
+    """Straight legs from waypoint to waypoint (offsets from ``origin``), each flown rest to rest with the
+    minimum-jerk profile ``s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5`` over ``leg_times[k]`` seconds, after
+    ``settle`` seconds at the first waypoint; the last waypoint is held to the end. A leg never leaves the
+    segment between its waypoints (no overshoot toward a wall), and its peak speed is 1.875 times its mean."""
+
+    waypoints: tuple[tuple[float, float, float], ...] = ((0.0, 0.0, 0.0),)
+    leg_times: tuple[float, ...] = ()
+    settle: float = 1.0
+
+    def __post_init__(self) -> None:
+        if len(self.leg_times) != len(self.waypoints) - 1 or any(t <= 0 for t in self.leg_times):
+            raise ValueError(f"WaypointReference needs one positive leg time per pair of waypoints, got "
+                             f"{len(self.waypoints)} waypoints and leg times {self.leg_times}")
+
+    def _local(self, t):
+        points = np.asarray(self.waypoints, dtype=float)
+        times = np.asarray(self.leg_times, dtype=float)
+        starts = self.settle + np.concatenate([[0.0], np.cumsum(times)])
+        p = np.repeat(points[:1], t.size, axis=0)
+        v = np.zeros((t.size, 3))
+        a = np.zeros((t.size, 3))
+        for k, duration in enumerate(times):
+            tau = np.clip((t - starts[k]) / duration, 0.0, 1.0)
+            reached = t >= starts[k]
+            step = points[k + 1] - points[k]
+            s = tau**3 * (10 - 15 * tau + 6 * tau**2)
+            ds = 30 * tau**2 * (1 - tau) ** 2 / duration
+            dds = 60 * tau * (1 - tau) * (1 - 2 * tau) / duration**2
+            p = np.where(reached[:, None], points[k] + s[:, None] * step, p)
+            inside = reached & (t < starts[k + 1])
+            v = np.where(inside[:, None], ds[:, None] * step, v)
+            a = np.where(inside[:, None], dds[:, None] * step, a)
         return p, v, a

@@ -183,6 +183,7 @@ class WallInspectorVectorEnv(VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         self._seeded = False
+        self.batch.close()
 
     # ------------------------------------------------------------------ internals
     def _seeds(self, seed: int | list[int | None] | None) -> list[int | None] | None:

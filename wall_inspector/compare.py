@@ -1,4 +1,5 @@
-"""``wall-inspector compare``: the paper's Tables I and II in simulation, with PID, MPC, SC-MPC and PPO.
+"""``wall-inspector compare``: the paper's Tables I and II in simulation, and the structures, with PID, MPC, SC-MPC
+and PPO.
 
 Flies every method on the scenarios of :mod:`controllers.paper_tables` (a progress
 bar counts the flights), prints the Markdown tables and the acceptance checks, and
@@ -11,7 +12,12 @@ writes to ``--out``:
 - ``timing.json``: what measures time, so differs from run to run: the MPCs' solve times
   (pooled and per flight), the wall time of the flights and (with ``--ray``) each
   flight's seconds on its worker;
-- ``table_i_circle.png`` (paper Fig. 6) and ``table_ii_sweep.png`` (paper Fig. 10).
+- ``table_i_circle.png`` (paper Fig. 6), ``table_ii_sweep.png`` (paper Fig. 10) and ``structures.png``
+  (the facade and the pier: paths and wall-normal errors).
+
+Beyond the paper's tables (``--tables all``, the default), the structures: ``Facade-v0`` and
+``Pier-v0`` (:data:`controllers.paper_tables.STRUCTURES`), each rotor's suction read from the
+nearest surfaces of their bodies; ``--tables both`` flies the paper's two only.
 
 Controllers fly the preset of ``--weights`` (:mod:`controllers.presets`): by default
 ``tuned``, each method's preset tuned by ``wall-inspector tune`` on the scenario's
@@ -49,9 +55,12 @@ from typing import Any
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out/compare", help="folder for tables, JSON and figures")
-    parser.add_argument("--tables", choices=("I", "II", "both"), default="both", help="which table(s) to reproduce")
+    parser.add_argument("--tables", choices=("I", "II", "both", "structures", "all"), default="all",
+                        help="which table(s) to fly: the paper's I, II or both, the structures (Facade-v0, Pier-v0), "
+                             "or all (default)")
     parser.add_argument("--seeds-i", type=int, default=5, help="seeds per row of Table I (default 5)")
     parser.add_argument("--seeds-ii", type=int, default=10, help="seeds of Table II (default 10)")
+    parser.add_argument("--seeds-structures", type=int, default=10, help="seeds of each structure task (default 10)")
     parser.add_argument("--duration", type=float, default=None,
                         help="shorten every flight to this many seconds (a quick look; not the paper's tables)")
     parser.add_argument("--weights", default="tuned", metavar="PRESET",
@@ -293,7 +302,7 @@ def run(args: argparse.Namespace) -> int:
     from wall_env.validation import check_output_folder
 
     try:
-        for name in ("seeds_i", "seeds_ii"):
+        for name in ("seeds_i", "seeds_ii", "seeds_structures"):
             if not 1 <= getattr(args, name) <= 1000:
                 raise UsageError(f"--{name.replace('_', '-')} must be in [1, 1000], got {getattr(args, name)}")
         extra: dict[str, Any] = {}
@@ -303,12 +312,15 @@ def run(args: argparse.Namespace) -> int:
             extra["duration"] = args.duration
         changes = _sigma_changes(args.mpc_sigma)
         scenarios = []
-        if args.tables in ("I", "both"):
+        if args.tables in ("I", "both", "all"):
             scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_i)), env_kwargs={**s.env_kwargs, **extra})
                           for s in pt.TABLE_I]
-        if args.tables in ("II", "both"):
+        if args.tables in ("II", "both", "all"):
             scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_ii)),
                                               env_kwargs={**s.env_kwargs, **extra}) for s in pt.TABLE_II]
+        if args.tables in ("structures", "all"):
+            scenarios += [dataclasses.replace(s, seeds=tuple(range(args.seeds_structures)),
+                                              env_kwargs={**s.env_kwargs, **extra}) for s in pt.STRUCTURES]
         tasks = sorted({s.env_id.split("/")[-1].removesuffix("-v0") for s in scenarios})
         _check_preset(args.weights, tasks)
         out = check_output_folder(args.out)
@@ -350,12 +362,12 @@ def _run(args: argparse.Namespace, scenarios: list, tasks: list[str], changes: d
             executor = ray_backend.flight_executor()
         t0 = time.perf_counter()
         results = []
-        for table in ("I", "II"):
-            chosen = [s for s in scenarios if s.table == table]
-            if chosen:
-                ppo = {} if args.no_ppo else _ppo_policies(chosen[0].env_id, residual=table == "II")
-                results += pt.run_scenarios(chosen, {**policies, **ppo}, progress=not args.no_progress,
-                                            executor=executor)
+        groups = [[s for s in scenarios if s.table == table] for table in ("I", "II")]
+        groups += [[s] for s in scenarios if s.table == "S"]  # one group per structure: each has its own agent
+        for chosen in filter(None, groups):
+            ppo = {} if args.no_ppo else _ppo_policies(chosen[0].env_id, residual=chosen[0].table == "II")
+            results += pt.run_scenarios(chosen, {**policies, **ppo}, progress=not args.no_progress,
+                                        executor=executor)
         flying_s = time.perf_counter() - t0
     budget_rows = budgets(args.weights, tasks, with_ppo=not args.no_ppo)
     paths = pt.write_outputs(results, out, note, extra_checks=_ppo_acceptance(results),

@@ -254,6 +254,10 @@ def export_controller(policy: MPC, folder: str | Path) -> Path:
     Returns the path of ``export.json``. ``ValueError`` for anything but an MPC policy."""
     if not isinstance(policy, MPC):
         raise ValueError(f"policy must be a controllers.MPC or SCMPC, got {type(policy).__name__}")
+    if policy.problem.surface_size:
+        raise ValueError("a controller for a scene with bodies (boxes, cylinders, meshes) cannot be exported: each "
+                         "step reads PyBullet's surfaces along the horizon, which the C controller has no source of; "
+                         "export one for a scene of planes")
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"{folder} exists and is not a folder")

@@ -46,6 +46,15 @@ Numeric values that may change between solves (reference, weights, limits, mass,
 model parameters ``theta``, wall geometry, ``dt``) are parameters of the symbolic
 functions, so changing them never regenerates code; only the model's structure
 (which effects), the rotor layout and the horizon length do.
+
+**Scenes with bodies** (boxes, cylinders, meshes: :mod:`wall_env.bodies`). The suction of
+stage ``k`` is the model's force at the predicted state ``x_k`` with each rotor's local
+surfaces there (:mod:`wall_env.surfaces`): the stage parameters then end with those
+surfaces (:data:`~wall_env.scene.SURFACE_SIZE` numbers per slot and rotor, as in the
+scene vector), which the policy fills in from PyBullet's query at the states its warm
+start predicts (:class:`~controllers.mpc.policy.MPC`), and the global parameters hold the
+scene's planes only. Over a face the prediction is exact; at an edge, in a recess or
+around a curve, each stage sees the surfaces where the vehicle is predicted to be.
 """
 
 from __future__ import annotations
@@ -143,10 +152,11 @@ class MPCProblem:
     """Symbolic residuals and numeric parameters of one MPC configuration.
 
     ``global parameters`` (one vector, see :meth:`global_params`):
-    ``[dt, mass, 1/sigma (29), u_low (4), u_high (4), theta (model), scene (walls...)]``.
-    ``stage parameters`` (17 per stage, see :meth:`stage_params`):
+    ``[dt, mass, 1/sigma (29), u_low (4), u_high (4), theta (model), scene (walls, ground, ceiling)]``.
+    ``stage parameters`` (:attr:`stage_size` per stage, see :meth:`stage_params`):
     ``[p_ref (3), v_ref (3), R_ref (9, column-major), terminal flag, rate flag]`` of the
-    state ``x_{k+1}`` the stage ends in.
+    state ``x_{k+1}`` the stage ends in, then, for a scene with bodies, the local surfaces
+    of the rotors at the state ``x_k`` the stage starts from (:attr:`surface_size` numbers).
     """
 
     def __init__(self, vehicle: VehicleParams, model: AeroModel, scene: Scene, horizon: int = 20,
@@ -162,7 +172,10 @@ class MPCProblem:
         self.limits = limits if limits is not None else InputLimits()
         self.rotor_positions_body = vehicle.rotor_positions_array
         self.scene_structure = scene.structure
-        self.global_size = 2 + RESIDUAL_SIZE + 8 + model.param_size + scene.vector_size
+        self.plane_size = scene.structure.plane_size
+        self.surface_size = scene.vector_size - self.plane_size  # per stage: the rotors' local surfaces
+        self.stage_size = STAGE_PARAM_SIZE + self.surface_size
+        self.global_size = 2 + RESIDUAL_SIZE + 8 + model.param_size + self.plane_size
         self._residual: ca.Function | None = None
         self._aero_force: ca.Function | None = None
 
@@ -183,7 +196,7 @@ class MPCProblem:
         return np.concatenate([
             [self.dt, self.vehicle.mass if mass is None else mass],
             self.weights.inverse_sigmas(), low, high,
-            self.model.theta(), scene.to_vector(),
+            self.model.theta(), scene.to_vector()[: self.plane_size],
         ])
 
     @property
@@ -192,10 +205,16 @@ class MPCProblem:
         start = 2 + RESIDUAL_SIZE + 8
         return slice(start, start + self.model.param_size)
 
-    def stage_params(self, p_ref: np.ndarray, v_ref: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
-        """Stage parameters ``(17, N)`` for references of ``x_1 .. x_N`` (``(N, 3)``, ``(N, 3)``, ``(N, 3, 3)``)."""
+    def stage_params(self, p_ref: np.ndarray, v_ref: np.ndarray, R_ref: np.ndarray,
+                     surfaces: np.ndarray | None = None) -> np.ndarray:
+        """Stage parameters ``(stage_size, N)`` for references of ``x_1 .. x_N`` (``(N, 3)``, ``(N, 3)``,
+        ``(N, 3, 3)``) and, with bodies, the rotors' local surfaces at ``x_0 .. x_{N-1}``
+        (``(surface_size, N)``; default: none felt)."""
         N = self.horizon
-        S = np.zeros((STAGE_PARAM_SIZE, N))
+        S = np.zeros((self.stage_size, N))
+        if self.surface_size:
+            S[STAGE_PARAM_SIZE:] = (np.asarray(surfaces) if surfaces is not None
+                                    else self.scene.to_vector()[self.plane_size:, None])
         S[StageParamIndex.p_ref] = np.asarray(p_ref).T
         S[StageParamIndex.v_ref] = np.asarray(v_ref).T
         # column-major flattening of each R, as CasADi's reshape reads it
@@ -222,7 +241,7 @@ class MPCProblem:
         i += 8
         theta = g[i:i + self.model.param_size]
         i += self.model.param_size
-        scene = g[i:i + self.scene.vector_size]
+        scene = g[i:i + self.plane_size]
         return dt, mass, inv_sigma, u_low, u_high, theta, scene
 
     def aero_force(self, p, R, v, u, mass, theta, scene_vector) -> ca.SX:
@@ -239,11 +258,11 @@ class MPCProblem:
         return (R[:, 2] * u[0] + force) / mass - ca.DM([0.0, 0.0, GRAVITY])
 
     def residual_function(self) -> ca.Function:
-        """``mpc_stage_residual(prev_point[19], point[19], stage[17], global) -> r[29]`` (weighted, SX)."""
+        """``mpc_stage_residual(prev_point[19], point[19], stage[stage_size], global) -> r[29]`` (weighted, SX)."""
         if self._residual is None:
             prev = ca.SX.sym("prev_point", POINT_SIZE)
             cur = ca.SX.sym("point", POINT_SIZE)
-            s = ca.SX.sym("stage", STAGE_PARAM_SIZE)
+            s = ca.SX.sym("stage", self.stage_size)
             g = ca.SX.sym("global", self.global_size)
             self._residual = ca.Function("mpc_stage_residual", [prev, cur, s, g], [self.residual(prev, cur, s, g)],
                                          ["prev_point", "point", "stage", "global"], ["r"])
@@ -251,6 +270,8 @@ class MPCProblem:
 
     def residual(self, prev, cur, s, g) -> ca.SX:
         dt, mass, inv_sigma, u_low, u_high, theta, scene = self._split_global(g)
+        if self.surface_size:  # the rotors' local surfaces at x_k, where the stage's force is taken
+            scene = ca.vertcat(scene, s[STAGE_PARAM_SIZE:])
         u_prev, p_k, R_k, v_k = unpack_point(prev)
         u_k, p_n, R_n, v_n = unpack_point(cur)
         # the state x_k and input u_k drive the dynamics to x_{k+1} = (p_n, R_n, v_n)
@@ -268,13 +289,15 @@ class MPCProblem:
         return inv_sigma * ca.vertcat(r_dyn, r_ref, r_term, r_rate, r_lim)
 
     def aero_force_function(self) -> ca.Function:
-        """``mpc_aero_force(p[3], R[9, column-major], v[3], u[4], global) -> F_aero[3]`` (N, world)."""
+        """``mpc_aero_force(p[3], R[9, column-major], v[3], u[4], global, surfaces[surface_size]) -> F_aero[3]``
+        (N, world); ``surfaces``: the rotors' local surfaces at ``p`` (empty for a scene of planes only)."""
         if self._aero_force is None:
             p, v = ca.SX.sym("p_world", 3), ca.SX.sym("v_world", 3)
             R = ca.SX.sym("R_body_to_world", 9)
             u = ca.SX.sym("u", 4)
             g = ca.SX.sym("global", self.global_size)
+            surfaces = ca.SX.sym("surfaces", self.surface_size)
             _, mass, _, _, _, theta, scene = self._split_global(g)
-            force = self.aero_force(p, ca.reshape(R, 3, 3), v, u, mass, theta, scene)
-            self._aero_force = ca.Function("mpc_aero_force", [p, R, v, u, g], [force])
+            force = self.aero_force(p, ca.reshape(R, 3, 3), v, u, mass, theta, ca.vertcat(scene, surfaces))
+            self._aero_force = ca.Function("mpc_aero_force", [p, R, v, u, g, surfaces], [force])
         return self._aero_force

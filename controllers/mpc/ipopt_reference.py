@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from controllers.mpc.cost import STAGE_PARAM_SIZE, MPCProblem
+from controllers.mpc.cost import MPCProblem
 from controllers.mpc.manifold import POINT_SIZE, TANGENT_SIZE, boxplus
 
 __all__ = ["IpoptReference", "IpoptResult"]
@@ -53,7 +53,7 @@ class IpoptReference:
         delta = ca.SX.sym("delta", TANGENT_SIZE, N)
         Z_base = ca.SX.sym("Z_base", POINT_SIZE, N)
         start = ca.SX.sym("start", POINT_SIZE)
-        S = ca.SX.sym("S", STAGE_PARAM_SIZE, N)
+        S = ca.SX.sym("S", problem.stage_size, N)
         g = ca.SX.sym("global", problem.global_size)
         residual = problem.residual_function()
         points = [boxplus(Z_base[:, k], delta[:, k], orthonormalise=False) for k in range(N)]

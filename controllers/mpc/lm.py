@@ -34,7 +34,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from controllers.mpc.cost import STAGE_PARAM_SIZE, MPCProblem
+from controllers.mpc.cost import MPCProblem
 from controllers.mpc.manifold import POINT_SIZE, TANGENT_SIZE, boxplus, boxplus_first_order
 from controllers.policy import SolverFailure
 from wall_env.codegen import NATIVE_FLAGS, BatchedFunction, CompiledFunction
@@ -95,7 +95,7 @@ def _backward_substitute(L: ca.SX, b: ca.SX) -> ca.SX:
 def _stage_symbols(problem: MPCProblem) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     """The inputs of a stage function: previous point, point, stage parameters, globals."""
     return (ca.SX.sym("prev_point", POINT_SIZE), ca.SX.sym("point", POINT_SIZE),
-            ca.SX.sym("stage", STAGE_PARAM_SIZE), ca.SX.sym("global", problem.global_size))
+            ca.SX.sym("stage", problem.stage_size), ca.SX.sym("global", problem.global_size))
 
 
 def _stage_linearisation(problem: MPCProblem) -> ca.Function:
@@ -174,7 +174,7 @@ def build_iteration_function(problem: MPCProblem) -> ca.Function:
     N = problem.horizon
     Z = ca.MX.sym("Z", POINT_SIZE, N)
     start = ca.MX.sym("start", POINT_SIZE)
-    S = ca.MX.sym("S", STAGE_PARAM_SIZE, N)
+    S = ca.MX.sym("S", problem.stage_size, N)
     g = ca.MX.sym("global", problem.global_size)
     lam = ca.MX.sym("lam")
 
@@ -227,7 +227,7 @@ def build_cost_function(problem: MPCProblem) -> ca.Function:
     N = problem.horizon
     Z = ca.MX.sym("Z", POINT_SIZE, N)
     start = ca.MX.sym("start", POINT_SIZE)
-    S = ca.MX.sym("S", STAGE_PARAM_SIZE, N)
+    S = ca.MX.sym("S", problem.stage_size, N)
     g = ca.MX.sym("global", problem.global_size)
     prev = ca.horzcat(start, Z[:, : N - 1])
     cost = ca.sum2(_stage_cost(problem).map(N, "serial")(prev, Z, S, ca.repmat(g, 1, N)))
@@ -270,7 +270,7 @@ def _lm_step(problem: MPCProblem, iteration: ca.Function) -> tuple[ca.Function, 
     n_z = POINT_SIZE * N
     state = ca.MX.sym("state", n_z + 9)
     start = ca.MX.sym("start", POINT_SIZE)
-    S = ca.MX.sym("S", STAGE_PARAM_SIZE, N)
+    S = ca.MX.sym("S", problem.stage_size, N)
     g = ca.MX.sym("global", problem.global_size)
     settings = ca.MX.sym("settings", LMSettingsIndex.size)
     Z = ca.reshape(state[:n_z], POINT_SIZE, N)
@@ -321,7 +321,7 @@ def build_solve_function(problem: MPCProblem, max_iterations: int) -> ca.Functio
     step_or_skip = ca.Function.if_else("mpc_lm_step_or_skip", idle, active)
     Z0 = ca.MX.sym("Z0", POINT_SIZE, N)
     start = ca.MX.sym("start", POINT_SIZE)
-    S = ca.MX.sym("S", STAGE_PARAM_SIZE, N)
+    S = ca.MX.sym("S", problem.stage_size, N)
     g = ca.MX.sym("global", problem.global_size)
     settings = ca.MX.sym("settings", LMSettingsIndex.size)
     n_z = POINT_SIZE * N

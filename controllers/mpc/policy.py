@@ -30,6 +30,13 @@ also puts the suction into the attitude reference at the predicted states
 horizon and compensation of a preset (:mod:`controllers.presets`): by default
 the tuned preset of the env's task.
 
+Among bodies (a scene with boxes, cylinders or meshes, :mod:`wall_env.bodies`) the policy
+asks PyBullet (its own :class:`~wall_env.surfaces.SurfaceQuery` of the env's public scene)
+for each rotor's local surfaces at the states its warm start predicts over the horizon
+(at a cold start: along the reference, with the measured attitude), so that every stage
+predicts the suction where the vehicle will be: past a window's jamb, over a ledge, around
+a pier (:mod:`controllers.mpc.cost`). A model without wall suction asks nothing.
+
 Timing, one entry per vehicle and step (a batch's call divided by its size):
 :attr:`MPC.solve_times` lists the seconds of the compiled call (warm start, reference
 states and LM; wall clock), :attr:`MPC.solve_cpu_times` the same in CPU time of the
@@ -56,7 +63,7 @@ from controllers.adaptation import ESTIMATED, RESIDUAL_EFFECT, AdaptationSetting
 from controllers.env_description import EnvDescription
 from controllers.mpc.cost import InputLimits, MPCProblem, MPCWeights
 from controllers.mpc.lm import LevenbergMarquardt, LMInfo, LMResult, LMSettings
-from controllers.mpc.manifold import POINT_SIZE
+from controllers.mpc.manifold import POINT_SIZE, PointIndex
 from controllers.mpc.reference import HorizonReference, ReferenceStates
 from controllers.mpc.step import CompiledStep, StepInput, StepOptions, StepOutput, StepStatus, cold_start_guess
 from controllers.policy import ControllerPolicy
@@ -64,6 +71,7 @@ from wall_env.aero import AeroModel
 from wall_env.effects import make_effect
 from wall_env.model_file import FlightModel
 from wall_env.observation import OBSERVATION_FIELDS
+from wall_env.surfaces import REACH_MARGIN, SurfaceQuery
 from wall_env.validation import check_range
 from wall_env.vehicle import VehicleParams
 
@@ -71,6 +79,7 @@ __all__ = ["MPC", "SCMPC", "SolveRecord", "PAPER_SUCTION", "COMPENSATION_MODES"]
 
 _OBS_P, _OBS_V = OBSERVATION_FIELDS["p_world"], OBSERVATION_FIELDS["v_world"]
 _OBS_R = OBSERVATION_FIELDS["R_body_to_world"]
+_OBS_ERROR = OBSERVATION_FIELDS["p_error"]
 _OBS_TIME = OBSERVATION_FIELDS["time"].start
 
 PAPER_SUCTION = {"k_s": 4.1, "d_thr": 0.132}  # the paper's flight-identified values (Sec. 4.4)
@@ -149,6 +158,16 @@ class MPC(ControllerPolicy):
             raise ValueError(f"threads must be an integer in [1, 64], got {threads!r}")
         self.step = CompiledStep(self.problem, self.attitude_problem, self.shift, self.solver.settings, int(threads))
         self._last_ok = np.zeros(0, dtype=bool)
+        self.surfaces: SurfaceQuery | None = None  # PyBullet's answers on the scene's bodies, when the model needs them
+        if self.problem.surface_size and any(m.get("wall_suction") is not None
+                                             for m in (self.model, self.attitude_model)):
+            self.surfaces = SurfaceQuery(description.scene, self.model_vehicle, self._surface_reach())
+
+    def _surface_reach(self) -> float:
+        """How far from a rotor the predicted stages ask for surfaces: the model's suction threshold (or the
+        largest an adaptive model may reach) and what a stage moves."""
+        suction = self.model.get("wall_suction") or self.attitude_model.get("wall_suction")
+        return float(suction.values["d_thr"][0]) + REACH_MARGIN if suction is not None else REACH_MARGIN
 
     @classmethod
     def from_env(cls, env: Any, *, preset: str | Path | None = "tuned", **kwargs: Any) -> MPC:
@@ -221,6 +240,8 @@ class MPC(ControllerPolicy):
         inputs[StepInput.observation][:] = batch
         self.horizon_reference.sampler([m["reference"] for m in self._memory], batch[:, _OBS_TIME],
                                        out=inputs[StepInput.samples])
+        if self.problem.surface_size:
+            self._predicted_surfaces(batch)
         t_solve, cpu_solve = time.perf_counter(), time.thread_time()
         self._solve_batch()
         t_end, cpu_end = time.perf_counter(), time.thread_time()
@@ -243,6 +264,37 @@ class MPC(ControllerPolicy):
         self.cpu_step_times.extend([(time.thread_time() - cpu_start) / n] * n)
         self.iteration_counts.extend(info[:, LMInfo.iterations].astype(int).tolist())
         return commands
+
+    def _predicted_states(self, batch: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where each row's solve starts from, ``x_0 .. x_N``: positions ``(n, N + 1, 3)`` and attitudes
+        ``(n, N + 1, 3, 3)`` of the measured state and the warm start (the previous solution shifted, as
+        the compiled step shifts it), or at a cold start the reference with the measured attitude."""
+        n, N = len(batch), self.problem.horizon
+        inputs = self.step.inputs
+        Z = inputs[StepInput.Z_previous].reshape(n, N, -1)  # [row, block, entry]: column-major blocks
+        k = min(self.shift, N - 1)
+        warm = np.concatenate([Z[:, k:], np.repeat(Z[:, N - 1:], k, axis=1)], axis=1)
+        R_now = batch[:, _OBS_R].reshape(n, 3, 3)
+        p = np.concatenate([batch[:, None, _OBS_P], warm[:, :, PointIndex.p_world]], axis=1)
+        R = np.concatenate([R_now[:, None], warm[:, :, PointIndex.R_body_to_world].reshape(n, N, 3, 3)
+                            .transpose(0, 1, 3, 2)], axis=1)
+        cold = inputs[StepInput.cold][:, 0] > 0.5
+        if cold.any():
+            samples = inputs[StepInput.samples][cold].reshape(-1, N + 1, 9)  # p, v, a at t + k dt
+            anchor = batch[cold][:, _OBS_P] - batch[cold][:, _OBS_ERROR]  # the reference position now
+            p[cold] = anchor[:, None, :] + samples[:, :, 0:3] - samples[:, :1, 0:3]
+            R[cold] = R_now[cold][:, None]
+        return p, R
+
+    def _predicted_surfaces(self, batch: np.ndarray) -> None:
+        """The rotors' local surfaces at each row's predicted states (the ``surfaces`` input of the step)."""
+        n, N = len(batch), self.problem.horizon
+        block = self.step.inputs[StepInput.surfaces].reshape(n, N + 1, -1)  # column-major: a column per state
+        if self.surfaces is None:
+            block[:] = self.problem.scene.to_vector()[self.problem.plane_size:]
+            return
+        p, R = self._predicted_states(batch)
+        block[:] = self.surfaces.rotor_surfaces_at(p.reshape(-1, 3), R.reshape(-1, 3, 3)).reshape(n, N + 1, -1)
 
     def _failure_reason(self, i: int) -> str:
         info = self.step.outputs[StepOutput.info][i]
@@ -305,6 +357,7 @@ class SCMPC(MPC):
         if settings is not None and model.get(RESIDUAL_EFFECT) is None:
             model = model.with_effect(make_effect(RESIDUAL_EFFECT))  # the residual force, from zero
         attitude_model = model.without("wall_suction") if compensation == "dynamics" else None
+        self._adapt_settings = settings
         super().__init__(description, model, attitude_model=attitude_model, **kwargs)
         if compensation == "dynamics":
             self.name = "SC-MPC (dynamics only)"
@@ -312,13 +365,19 @@ class SCMPC(MPC):
         self.estimate_history: list[np.ndarray] = []
         if settings is not None:
             self.adaptation = OnlineSuctionEstimator(self.model, self.model_vehicle, description.scene,
-                                                     self.control_dt, settings)
+                                                     self.control_dt, settings, surfaces=self.surfaces)
             self.name += " adaptive"
             self._last_thrust = np.zeros(0)
             labels = self.attitude_model.param_labels()
             self._attitude_columns = [labels.index(label) for label in self.model.param_labels() if label in labels]
             model_labels = self.model.param_labels()
             self._attitude_sources = [model_labels.index(label) for label in self.model.param_labels() if label in labels]
+
+    def _surface_reach(self) -> float:
+        reach = super()._surface_reach()
+        if self._adapt_settings is not None:  # the estimate may move d_thr up to the grid's end
+            reach = max(reach, float(self._adapt_settings.thresholds()[-1]) + REACH_MARGIN)
+        return reach
 
     @property
     def estimates(self) -> dict[str, np.ndarray]:

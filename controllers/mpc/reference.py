@@ -167,14 +167,16 @@ class HorizonSampler:
 
 
 def build_reference_function(force_problem: MPCProblem) -> ca.Function:
-    """``mpc_horizon_reference(samples[9x(N+1)], p_ref_now[3], p_at[3xN], v_at[3xN], global, options[4])
-    -> (p_ref[3xN], v_ref[3xN], R_ref[9xN], thrust[1xN])``.
+    """``mpc_horizon_reference(samples[9x(N+1)], p_ref_now[3], p_at[3xN], v_at[3xN], global, options[4],
+    surfaces[surface_size x N]) -> (p_ref[3xN], v_ref[3xN], R_ref[9xN], thrust[1xN])``.
 
     ``samples``: the env's reference at ``t + k dt``, ``k = 0 .. N`` (:class:`HorizonSampler`);
     ``p_ref_now``: the observation's reference position, which anchors the horizon;
     ``p_at``, ``v_at``: where the model force is taken if ``options[at_prediction]``;
     ``global``: ``force_problem``'s global parameters (mass, model parameters, walls);
-    ``options`` as :class:`ReferenceOptions`. ``R_ref`` is column-major per stage.
+    ``options`` as :class:`ReferenceOptions`; ``surfaces``: for a scene with bodies, the rotors' local
+    surfaces at ``x_1 .. x_N`` (where the force is taken; no rows for a scene of planes only). ``R_ref`` is
+    column-major per stage.
     """
     N = force_problem.horizon
     samples = ca.SX.sym("samples", 9, N + 1)
@@ -182,6 +184,7 @@ def build_reference_function(force_problem: MPCProblem) -> ca.Function:
     p_at, v_at = ca.SX.sym("p_at", 3, N), ca.SX.sym("v_at", 3, N)
     g = ca.SX.sym("global", force_problem.global_size)
     options = ca.SX.sym("options", ReferenceOptions.size)
+    surfaces = ca.SX.sym("surfaces", force_problem.surface_size, N)
     yaw, max_tilt = options[ReferenceOptions.yaw], options[ReferenceOptions.max_tilt]
     model_attitude, at_prediction = options[ReferenceOptions.model_attitude], options[ReferenceOptions.at_prediction]
     force = force_problem.aero_force_function()
@@ -195,15 +198,15 @@ def build_reference_function(force_problem: MPCProblem) -> ca.Function:
         u = ca.vertcat(ca.norm_2(f_kinematic), 0.0, 0.0, 0.0)
         p_force = ca.if_else(at_prediction, p_at[:, k - 1], p_ref)
         v_force = ca.if_else(at_prediction, v_at[:, k - 1], v_ref)
-        f = f_kinematic - force(p_force, ca.vec(R_kinematic), v_force, u, g)
+        f = f_kinematic - force(p_force, ca.vec(R_kinematic), v_force, u, g, surfaces[:, k - 1])
         R_model = attitude_from_thrust_symbolic(f, yaw, max_tilt)
         p_cols.append(p_ref)
         v_cols.append(v_ref)
         R_cols.append(ca.if_else(model_attitude, ca.vec(R_model), ca.vec(R_kinematic)))
         thrusts.append(ca.if_else(model_attitude, ca.norm_2(f), ca.norm_2(f_kinematic)))
-    return ca.Function("mpc_horizon_reference", [samples, p_ref_now, p_at, v_at, g, options],
+    return ca.Function("mpc_horizon_reference", [samples, p_ref_now, p_at, v_at, g, options, surfaces],
                        [ca.horzcat(*p_cols), ca.horzcat(*v_cols), ca.horzcat(*R_cols), ca.horzcat(*thrusts)],
-                       ["samples", "p_ref_now", "p_at", "v_at", "global", "options"],
+                       ["samples", "p_ref_now", "p_at", "v_at", "global", "options", "surfaces"],
                        ["p_ref", "v_ref", "R_ref", "thrust"])
 
 
@@ -241,24 +244,31 @@ class HorizonReference:
         self._inputs: list[np.ndarray] = []
         self._outputs: list[np.ndarray] = []
 
+    def _no_surfaces(self) -> np.ndarray:
+        problem = self.force_problem
+        return np.tile(problem.scene.to_vector()[problem.plane_size:], problem.horizon)
+
     def options(self, yaw: float, at_prediction: bool) -> np.ndarray:
         """The ``options`` input of :func:`build_reference_function`."""
         return np.array([yaw, self.max_tilt, float(self.model_attitude), float(at_prediction)])
 
     def build(self, reference: Reference, time: float, p_ref_now: np.ndarray, force_params: np.ndarray,
-              p_predicted: np.ndarray | None = None, v_predicted: np.ndarray | None = None) -> ReferenceStates:
+              p_predicted: np.ndarray | None = None, v_predicted: np.ndarray | None = None,
+              surfaces: np.ndarray | None = None) -> ReferenceStates:
         """References along ``reference`` for the horizon starting at ``time`` (s), anchored at
         ``p_ref_now`` (m, world), with the force of ``force_problem`` at global parameters ``force_params``.
 
         ``p_predicted``, ``v_predicted`` ``(N, 3)``: where the vehicle is predicted to be
         (the warm start); the model force is evaluated there if given, else on the reference.
+        ``surfaces`` ``(surface_size, N)``: with bodies, the rotors' local surfaces there (default: none felt).
         """
         N = self.force_problem.horizon
         at_prediction = p_predicted is not None and v_predicted is not None
         values = [self.sampler([reference], np.array([float(time)]))[0], p_ref_now,
                   np.zeros(3 * N) if p_predicted is None else np.ravel(np.asarray(p_predicted).T, order="F"),
                   np.zeros(3 * N) if v_predicted is None else np.ravel(np.asarray(v_predicted).T, order="F"),
-                  force_params, self.options(reference.yaw, at_prediction)]
+                  force_params, self.options(reference.yaw, at_prediction),
+                  self._no_surfaces() if surfaces is None else np.ravel(surfaces, order="F")]
         if self._function is None:
             self._function = BatchedFunction(reference_function(self.force_problem), NATIVE_FLAGS)
             self._inputs = [np.zeros((1, k)) for k in self._function.nnz_in]

@@ -52,9 +52,9 @@ class StepOptions:
 
 
 class StepInput:
-    """Input order of :func:`build_step_function`."""
+    """Input order of :func:`build_step_function` (``surfaces`` only for a scene with bodies)."""
 
-    Z_previous, cold, observation, samples, global_params, attitude_global, options = range(7)
+    Z_previous, cold, observation, samples, global_params, attitude_global, options, surfaces = range(8)
 
 
 class StepOutput:
@@ -92,6 +92,10 @@ def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift
     ``info`` as :class:`~controllers.mpc.lm.LMInfo`; ``Z0`` and ``S`` are the initial guess
     and stage parameters the solve started from (a benchmark hands them to IPOPT);
     ``status`` as :class:`StepStatus`.
+
+    For a scene with bodies the function takes one more input, ``surfaces[surface_size x (N+1)]``: the
+    rotors' local surfaces at the states ``x_0 .. x_N`` the warm start predicts (the measured state first),
+    which the dynamics of stage ``k`` read at ``x_k`` and the attitude reference at ``x_1 .. x_N``.
     """
     N = problem.horizon
     Z_previous = ca.MX.sym("Z_previous", POINT_SIZE, N)
@@ -101,6 +105,7 @@ def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift
     g = ca.MX.sym("global", problem.global_size)
     g_attitude = ca.MX.sym("attitude_global", attitude_problem.global_size)
     options = ca.MX.sym("options", StepOptions.size)
+    surfaces = ca.MX.sym("surfaces", problem.surface_size, N + 1)
 
     p_world = observation[OBSERVATION_FIELDS["p_world"]]
     # the observation holds R row by row; the blocks hold it column by column
@@ -114,8 +119,10 @@ def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift
                                    options[ReferenceOptions.model_attitude], at_prediction)
     p_ref, v_ref, R_ref, thrust = reference_function(attitude_problem)(
         samples, p_ref_now, Z_warm[PointIndex.p_world, :], Z_warm[PointIndex.v_world, :], g_attitude,
-        reference_options)
+        reference_options, surfaces[:, 1:] if problem.surface_size else ca.MX(0, N))
     S = ca.vertcat(p_ref, v_ref, R_ref, ca.DM(problem.stage_flags()))  # the rows of StageParamIndex
+    if problem.surface_size:
+        S = ca.vertcat(S, surfaces[:, :N])  # each stage's force at x_k
     Z_cold = cold_start_guess(thrust, p_ref, R_ref, v_ref)
     Z0 = ca.if_else(cold, Z_cold, Z_warm)
     start = ca.vertcat(ca.MX.zeros(4), x_now)  # its input slot is unused
@@ -125,10 +132,13 @@ def build_step_function(problem: MPCProblem, attitude_problem: MPCProblem, shift
     Z, info = solve_function(problem, unrolled)(Z0, start, S, g, lm_settings)
     finite_observation = finite(ca.sum1(observation))
     ok = finite_observation * (1 - info[LMInfo.failed]) * finite(info[LMInfo.cost] + ca.sum1(ca.sum2(Z)))
-    return ca.Function("mpc_control_step", [Z_previous, cold, observation, samples, g, g_attitude, options],
-                       [Z, info, Z0, S, ca.vertcat(ok, finite_observation, cold)],
-                       ["Z_previous", "cold", "observation", "samples", "global", "attitude_global", "options"],
-                       ["Z", "info", "Z0", "S", "status"])
+    inputs = [Z_previous, cold, observation, samples, g, g_attitude, options]
+    names = ["Z_previous", "cold", "observation", "samples", "global", "attitude_global", "options"]
+    if problem.surface_size:
+        inputs.append(surfaces)
+        names.append("surfaces")
+    return ca.Function("mpc_control_step", inputs, [Z, info, Z0, S, ca.vertcat(ok, finite_observation, cold)],
+                       names, ["Z", "info", "Z0", "S", "status"])
 
 
 class CompiledStep:

@@ -154,7 +154,7 @@ class Effect(ABC):
     def wrench(self, ctx: FlightContext, theta: dict[str, ca.SX]) -> Wrench:
         """The force and moment this effect puts on the vehicle, symbolically."""
 
-    def applies_to(self, scene_structure: tuple[int, bool, bool]) -> bool:
+    def applies_to(self, scene_structure: tuple) -> bool:
         """Whether the scene has what this effect acts against (walls, ground, ceiling)."""
         return True
 

@@ -32,7 +32,7 @@ class CeilingEffect(Effect):
     options = {"distance_offset": False}
     optional_parameters = {"distance_offset": (OFFSET,)}
 
-    def applies_to(self, scene_structure: tuple[int, bool, bool]) -> bool:
+    def applies_to(self, scene_structure: tuple) -> bool:
         return scene_structure[2]
 
     def wrench(self, ctx: FlightContext, theta: dict[str, ca.SX]) -> Wrench:

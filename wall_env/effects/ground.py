@@ -46,7 +46,7 @@ class GroundEffect(Effect):
     options = {"distance_offset": False}
     optional_parameters = {"distance_offset": (OFFSET,)}
 
-    def applies_to(self, scene_structure: tuple[int, bool, bool]) -> bool:
+    def applies_to(self, scene_structure: tuple) -> bool:
         return scene_structure[1]
 
     def wrench(self, ctx: FlightContext, theta: dict[str, ca.SX]) -> Wrench:
