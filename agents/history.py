@@ -89,6 +89,14 @@ class HistorySettings:
         return asdict(self)
 
 
+def observation_width(space: spaces.Space) -> int:
+    """Entries of a flat observation space (a history stacks flat observations only)."""
+    shape = space.shape
+    if shape is None or len(shape) != 1:
+        raise ValueError(f"an observation history needs flat observations (a 1-D Box), got the space {space}")
+    return int(shape[0])
+
+
 class ObservationHistory:
     """The per-row memory of :class:`HistorySettings` for a batch of ``n`` rows (resized on demand)."""
 
@@ -141,7 +149,7 @@ class VecObservationHistory(VecEnvWrapper):
     """A Stable-Baselines3 vector env whose observations are :class:`ObservationHistory`'s inputs."""
 
     def __init__(self, venv: VecEnv, settings: HistorySettings):
-        width = int(venv.observation_space.shape[0])
+        width = observation_width(venv.observation_space)
         self.history = ObservationHistory(settings, width)
         size = settings.input_size(width)
         space = spaces.Box(-np.inf, np.inf, shape=(size,), dtype=np.float32)

@@ -113,10 +113,10 @@ def check_observations(config: dict[str, Any], n: int = 8, seed: int = 12345) ->
     """A few of the network's inputs from one short flight (zero actions) for the save/load check: raw
     observations, through the configuration's observation history if it has one."""
     from agents.envs import history_settings, make_env
-    from agents.history import ObservationHistory
+    from agents.history import ObservationHistory, observation_width
 
     env = make_env(config, randomize=False, monitor=False)
-    history = ObservationHistory(history_settings(config), int(env.observation_space.shape[0]))
+    history = ObservationHistory(history_settings(config), observation_width(env.observation_space))
     try:
         obs, _ = env.reset(seed=seed)
         out = [history(obs[None], np.array([True]))[0]]

@@ -249,7 +249,7 @@ class EnvConfig:
         try:
             standoff = check_range("standoff", spec.standoff if standoff is None else standoff, lowest, 5.0)
         except ValueError as exc:
-            if model is None:
+            if model is None or spec.wall_axis is None:
                 raise
             raise ValueError(f"{exc}; {flight_model.behind_standoff(spec.wall_axis, spec.closest_approach)}") from None
         altitude = check_range("altitude", spec.altitude if altitude is None else altitude, *spec.altitude_range)
