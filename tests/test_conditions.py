@@ -134,6 +134,23 @@ def test_the_wind_acts_through_the_air_relative_drag():
         np.testing.assert_allclose(drag[row], expected, rtol=0.02, atol=2e-3)  # mean over the step's substeps
 
 
+@pytest.mark.parametrize("mean", [(0.0, 0.0, 0.0), (0.5, 0.5, 0.0)])
+def test_an_effects_own_steady_wind_is_kept_and_the_conditions_wind_adds_to_it(mean):
+    from wall_env.effects import effects_from_spec
+
+    C, w = np.array([0.08, 0.1, 0.12]), np.array([1.5, -1.0, 0.0])
+    effects = effects_from_spec("quadratic_drag:C=0.08/0.1/0.12,w=1.5/-1/0")
+    envs = _vector(2, 4, effects=effects, conditions={"wind": {"mean": list(mean)}})
+    _, _, _, _, info = envs.step(np.zeros((2, 4)))
+    drag, v = info["effect_forces_world"]["quadratic_drag"], info["v_world"]
+    for row in range(2):
+        q = info["q_body_to_world"][row]
+        R = Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix()
+        v_body = R.T @ (v[row] - w - np.asarray(mean))
+        np.testing.assert_allclose(drag[row], -R @ (C * np.abs(v_body) * v_body), rtol=0.02, atol=2e-3)
+    assert np.linalg.norm(drag[0]) > 0.1  # 0.08 x 1.5^2 N along x alone
+
+
 def test_the_sensing_error_has_its_presets_statistics():
     rows = 400
     envs = gym.make_vec("WallInspector/WallHover-v0", num_envs=rows, vectorization_mode="vector_entry_point",

@@ -136,13 +136,13 @@ def test_compensation_forms_against_their_equations(hover_env, compensation):
     np.testing.assert_allclose(refs.R_body_to_world[:, :, 2], np.tile(f / np.linalg.norm(f), (20, 1)), atol=1e-9)
     if R_level is not None:
         np.testing.assert_allclose(R_level, R_yaw, atol=1e-12)
-    # the dynamics factor (Eq. 13) carries the suction in both forms: the model force at the state
+    # the dynamics factor (Eq. 13) carries the suction in both forms: the model force at the state (no bodies: no local surfaces)
     force = np.asarray(policy.problem.aero_force_function()(p_ref, R_yaw.ravel(order="F"), np.zeros(3),
-                                                              [mass * GRAVITY, 0, 0, 0], memory["global"])).ravel()
+                                                              [mass * GRAVITY, 0, 0, 0], memory["global"], [])).ravel()
     np.testing.assert_allclose(force, suction, atol=1e-12)
     nominal = MPC.from_env(hover_env, preset="paper")
     nominal_force = np.asarray(nominal.problem.aero_force_function()(
-        p_ref, R_yaw.ravel(order="F"), np.zeros(3), [mass * GRAVITY, 0, 0, 0], nominal._episode_memory(0)["global"]))
+        p_ref, R_yaw.ravel(order="F"), np.zeros(3), [mass * GRAVITY, 0, 0, 0], nominal._episode_memory(0)["global"], []))
     np.testing.assert_allclose(nominal_force.ravel(), 0.0, atol=1e-12)  # drag only, at rest
 
 
@@ -182,11 +182,11 @@ def test_controllers_follow_a_randomised_corridor_at_each_episode_start():
             state = parse_observation(obs[i])  # the env's true position and attitude at the start
             p, R = state["p_world"], state["R_body_to_world"]
             force = np.asarray(policy.problem.aero_force_function()(
-                p, R.ravel(order="F"), np.zeros(3), [9.81, 0, 0, 0], policy._memory[i]["global"])).ravel()
+                p, R.ravel(order="F"), np.zeros(3), [9.81, 0, 0, 0], policy._memory[i]["global"], [])).ravel()
             expected = _hand_suction(p, R, scenes[i].walls, base.vehicle.rotor_positions_array)
             np.testing.assert_allclose(force, expected, atol=1e-9)
             frozen = np.asarray(policy.problem.aero_force_function()(
-                p, R.ravel(order="F"), np.zeros(3), [9.81, 0, 0, 0], policy.global_params)).ravel()
+                p, R.ravel(order="F"), np.zeros(3), [9.81, 0, 0, 0], policy.global_params, [])).ravel()
             if scenes[i] != built_scene:
                 assert np.linalg.norm(frozen - expected) > 1e-3  # what the frozen scene would have used
     vec_env.close()

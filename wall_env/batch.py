@@ -354,12 +354,12 @@ class EnvBatch:
         if self._turbulence is not None:
             self._turbulence.reset(rows, self.streams.normal(rows, TurbulenceState.NORMALS),
                                    sample.get("gust_scale", 1.0))
-            wind = self._mean_wind + self._turbulence.gust_world()[rows]
+            gust = self._turbulence.gust_world()[rows]
+            for columns in self._wind_columns:  # the effect's own steady wind, the conditions' and the gust
+                self.simulator.theta[rows, columns] = self._theta0[columns] + self._mean_wind + gust
+        else:
             for columns in self._wind_columns:
-                self.simulator.theta[rows, columns] = wind
-        elif self._wind_columns:
-            for columns in self._wind_columns:
-                self.simulator.theta[rows, columns] = self._mean_wind
+                self.simulator.theta[rows, columns] = self._theta0[columns] + self._mean_wind
         if not self.ideal_observation:
             self._estimate(rows, x)
 
@@ -386,9 +386,9 @@ class EnvBatch:
             sim.u[:] = command
         if self._turbulence is not None:
             self._turbulence.step(self.streams.step_normals(TurbulenceState.NORMALS, active))
-            wind = self._mean_wind + self._turbulence.gust_world()
+            gust = self._turbulence.gust_world()
             for columns in self._wind_columns:
-                sim.theta[:, columns] = wind
+                sim.theta[:, columns] = self._theta0[columns] + self._mean_wind + gust
         sim.step()
         sim.x[:] = sim.x_next
         self.R[:] = sim.R

@@ -49,6 +49,7 @@ import argparse
 import contextlib
 import dataclasses
 import json
+import sys
 import time
 from typing import Any
 
@@ -232,7 +233,7 @@ def _ppo_policies(env_id: str, residual: bool) -> dict:
     if pretrained_path(task).is_dir():
         policies["PPO"] = policy_factory()
     else:
-        print(f"no shipped PPO agent for {task} ({pretrained_path(task)}): PPO left out")
+        print(f"no shipped PPO agent for {task} ({pretrained_path(task)}): PPO left out", file=sys.stderr)
     if residual and pretrained_path(task, "residual_scmpc").is_dir():
         policies["PPO + SC-MPC"] = policy_factory(variant="residual_scmpc")
     if pretrained_path(task, "teacher_scmpc").is_dir():  # its own row: it learned from SC-MPC, not alone
