@@ -1,8 +1,9 @@
 """``wall-inspector``: one command line for every job of the project.
 
-Each subcommand lives in the module that owns its work and exposes
-``add_arguments(parser)`` and ``run(args) -> int``; it is imported only when used,
-so ``wall-inspector bench-env`` never loads PyTorch.
+Each subcommand lives in a module of this package that exposes ``add_arguments(parser)``
+and ``run(args) -> int`` and calls the plain functions of the library packages (wall_env,
+controllers, agents, discovery), which parse, print and exit nothing; it is imported only
+when used, so ``wall-inspector bench-env`` never loads PyTorch.
 
 Usage errors look the same for every command: one line on stderr,
 ``wall-inspector COMMAND: error: MESSAGE``, and exit status 2. They come from argparse
@@ -24,7 +25,7 @@ INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT)
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("wall_inspector.demo", "fly a short rollout near a wall, print what happened and write a picture"),
-    "bench-env": ("wall_env.benchmark", "measure environment steps per second and reset time"),
+    "bench-env": ("wall_inspector.bench_env", "measure environment steps per second and reset time"),
     "bench-mpc": ("wall_inspector.bench_mpc", "time SC-MPC solves in closed loop against IPOPT on the same problems"),
     "compare": ("wall_inspector.compare", "reproduce the paper's Tables I and II with PID, MPC and SC-MPC (tables, JSON, plots)"),
     "robustness": ("wall_inspector.robustness", "fly every method, told only the nominal model, over a grid of true worlds "
