@@ -206,7 +206,7 @@ def _timing(args: argparse.Namespace) -> int:
                    "--quiet"]
         process_times, inprocess_times = [], []
         # the in-process figure is the work alone: the modules discover loads are imported first
-        for module in ("discovery.cli", "discovery.workflow", "discovery.report", "discovery.plots", "matplotlib.figure"):
+        for module in ("wall_inspector.discover", "discovery.workflow", "discovery.report", "discovery.plots", "matplotlib.figure"):
             importlib.import_module(module)
         load_start = os.getloadavg()
         for i in range(args.repeats):

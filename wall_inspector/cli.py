@@ -37,10 +37,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench-throughput": ("wall_inspector.bench_throughput", "training env steps per second for several vector-env layouts"),
     "notebooks": ("wall_inspector.notebooks", "run the notebooks top to bottom (and save their outputs)"),
     "readme": ("wall_inspector.readme", "copy result tables written by other commands into README.md"),
-    "import-log": ("discovery.import_log", "convert a PX4 ULog or a ROS 2 bag into the project's flight log (CSV + JSON)"),
+    "import-log": ("wall_inspector.import_log", "convert a PX4 ULog or a ROS 2 bag into the project's flight log (CSV + JSON)"),
     "fly": ("discovery.fly", "record a flight log (CSV + JSON) from the simulator with measurement noise"),
     "bench-discover": ("discovery.benchmark", "time discovery on a 60 s, 100 Hz log; --acceptance: its accuracy on hidden-effect logs"),
-    "discover": ("discovery.cli", "find, name and fit what the nominal model misses in flight logs; write a model file"),
+    "discover": ("wall_inspector.discover", "find, name and fit what the nominal model misses in flight logs; write a model file"),
     "export": ("wall_inspector.export", "write a PPO agent as ONNX, or MPC / SC-MPC as C, to fly without this package"),
     "bench-export": ("wall_inspector.bench_export", "time the exported C controller's step (C timing loop) and the ONNX "
                                                     "policy's step on the Table II flight, beside Python's predict"),
