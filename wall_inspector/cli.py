@@ -39,7 +39,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "readme": ("wall_inspector.readme", "copy result tables written by other commands into README.md"),
     "import-log": ("wall_inspector.import_log", "convert a PX4 ULog or a ROS 2 bag into the project's flight log (CSV + JSON)"),
     "fly": ("wall_inspector.fly", "record a flight log (CSV + JSON) from the simulator with measurement noise"),
-    "bench-discover": ("discovery.benchmark", "time discovery on a 60 s, 100 Hz log; --acceptance: its accuracy on hidden-effect logs"),
+    "bench-discover": ("wall_inspector.bench_discover", "time discovery on a 60 s, 100 Hz log; --acceptance: its "
+                                                        "accuracy on hidden-effect logs"),
     "discover": ("wall_inspector.discover", "find, name and fit what the nominal model misses in flight logs; write a model file"),
     "export": ("wall_inspector.export", "write a PPO agent as ONNX, or MPC / SC-MPC as C, to fly without this package"),
     "bench-export": ("wall_inspector.bench_export", "time the exported C controller's step (C timing loop) and the ONNX "
