@@ -17,7 +17,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from typing import NoReturn
+from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn
+
+if TYPE_CHECKING:
+    from wall_env.run_lock import RunLock
 
 USAGE_ERROR = 2  # exit status of every usage error (argparse's convention)
 INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT)
@@ -65,6 +69,17 @@ def print_usage_error(prog: str, message: str) -> int:
 def usage_error(prog: str, message: str) -> NoReturn:
     """:func:`print_usage_error`, then exit with status 2."""
     raise SystemExit(print_usage_error(prog, message))
+
+
+def lock_run_folder(folder: str | Path, command: str) -> RunLock:
+    """:class:`~wall_env.run_lock.RunLock` of ``folder`` acquired now; a busy folder is a usage error:
+    ``SystemExit`` with the one-line message naming the run that holds it."""
+    from wall_env.run_lock import RunFolderBusy, RunLock
+
+    try:
+        return RunLock(folder, command).acquire()
+    except RunFolderBusy as exc:
+        raise SystemExit(str(exc)) from None
 
 
 def _parser() -> argparse.ArgumentParser:
