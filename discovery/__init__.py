@@ -16,8 +16,9 @@ closed-loop check of SC-MPC built from the discovered model)::
     found.model_.save("model.json")
     found.predict(read_log("other.csv")), found.score(read_log("other.csv"))
 
-Command line: ``wall-inspector fly`` records logs from the simulator and
-``wall-inspector discover`` runs the workflow. The log format is documented in
+Command line (:mod:`wall_inspector`): ``wall-inspector fly`` records logs from the simulator,
+``wall-inspector import-log`` converts PX4 ULogs and ROS 2 bags and ``wall-inspector discover``
+runs the workflow. The log format is documented in
 :mod:`discovery.flight_log`; the modules, in the order of the workflow:
 :mod:`~discovery.flight_log`, :mod:`~discovery.coverage`, :mod:`~discovery.differentiation`,
 :mod:`~discovery.aero_eval`, :mod:`~discovery.residuals`, :mod:`~discovery.prediction`,
@@ -27,9 +28,8 @@ logged thrust, and :mod:`~discovery.thrust_map`, an affine thrust map), :mod:`~d
 :mod:`~discovery.cancelling`, :mod:`~discovery.wall_extent`, :mod:`~discovery.noise`,
 :mod:`~discovery.unexplained`, :mod:`~discovery.standins`,
 :mod:`~discovery.workflow`, :mod:`~discovery.report`, :mod:`~discovery.plots`,
-:mod:`~discovery.closed_loop`, :mod:`~discovery.fly`, :mod:`~discovery.scenarios`,
-:mod:`~discovery.cli`; beside them :mod:`~discovery.importers` (PX4 ULog and ROS 2 bags,
-``wall-inspector import-log`` in :mod:`~discovery.import_log`), :mod:`~discovery.coverage`
+:mod:`~discovery.closed_loop`, :mod:`~discovery.fly`, :mod:`~discovery.scenarios`;
+beside them :mod:`~discovery.importers` (PX4 ULog and ROS 2 bags), :mod:`~discovery.coverage`
 (what a flight can and cannot tell), :mod:`~discovery.determination` (only determined
 parameters reach the model file) and :mod:`~discovery.hidden_effects` (hidden-effect logs
 for ``wall-inspector bench-discover --acceptance``).

@@ -110,3 +110,24 @@ def test_ctrl_c_in_any_command_ends_without_a_traceback(monkeypatch, capsys):
     monkeypatch.setattr(wall_inspector.demo, "run", interrupted)
     assert main(["demo"]) == 130
     assert capsys.readouterr().err == "wall-inspector demo: interrupted\n"
+
+
+# what a command needs besides the bad flag, so that the flag is the only thing wrong
+REQUIRED = {
+    "import-log": ["flight.ulg", "--vehicle", "vehicle.yaml", "--scene", "scene.yaml"],
+    "fly": ["--out", "flight.csv"],
+    "discover": ["flight.csv", "--out", "results"],
+    "export": ["ppo", "--out", "exported"],
+}
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_every_command_of_the_table_refuses_a_bad_flag_in_one_line(command, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main([command, *REQUIRED.get(command, []), "--no-such-flag"]) == 2
+    captured = capsys.readouterr()
+    assert captured.err == (f"wall-inspector {command}: error: unrecognized arguments: --no-such-flag "
+                            f"(see wall-inspector {command} --help)\n"), \
+        f"{captured.err!r}; if {command} has required arguments, add them to REQUIRED"
+    assert captured.out == ""
+    assert not any(tmp_path.iterdir())  # nothing written before the check

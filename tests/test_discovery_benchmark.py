@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from discovery.benchmark import summarise
+from discovery.benchmark import format_summary, summarise
 from discovery.fly import fly
 from discovery.hidden_effects import draw_pair
 from discovery.scenarios import SCENARIOS
@@ -18,7 +18,7 @@ def _record(case, errors, in_std, *, named_right=True, form_right=True, left_ope
             "forms_left_open": list(left_open), "gap_reduction": 0.9, "seed": seed, "rate_hz": 100.0}
 
 
-def test_misses_of_ten_percent_are_told_apart(capsys):
+def test_misses_of_ten_percent_are_told_apart():
     records = [
         _record("a", {"a.x": 0.02}, {"a.x": 0.5}),
         _record("b", {"b.x": 0.12}, {"b.x": 1.5}),  # noise: the log does not resolve it to 10 %
@@ -33,7 +33,7 @@ def test_misses_of_ten_percent_are_told_apart(capsys):
     assert summary["params_off_within_2_std"] == 1
     assert [o["param"] for o in summary["params_off_by_more_than_10_percent"]] == ["b.x", "c.x", "d.x", "d.k"]
     assert summary["clean_logs_nothing_named"] == 1 and summary["flights_ended_early"] == 1
-    out = capsys.readouterr().out
+    out = format_summary(summary)  # what bench-discover --acceptance prints
     assert "b (log seed 7, 100 Hz): b.x 12.0 %, 1.5 standard errors" in out
     assert "1 within 2 standard errors" in out and "2 of a fuller form the report names as left open" in out
     assert "1 farther or missing" in out
@@ -169,3 +169,42 @@ def test_the_plain_ceiling_flight_holds_against_the_strongest_plain_effect_drawn
                                                           30.0, 50.0)
     assert collisions == 0 and not ended_early
     assert 0.0275 < closest < 0.05, closest
+
+
+def test_acceptance_flies_every_form_pair_and_clean_scenario_at_cycling_rates(monkeypatch, tmp_path, capsys):
+    """bench-discover --acceptance: which logs it flies (cases, seeds, rates), and that each record reaches the
+    printed lines and the JSON. Discovery itself is replaced by a record of what was asked: its figures are
+    the other tests' business."""
+    import json
+
+    import discovery.hidden_effects as hidden_effects
+    from discovery.benchmark import CLEAN_SCENARIOS, RATES
+    from wall_inspector.cli import main
+
+    asked = []
+
+    def record_of(effects, fly_kwargs, seed, rate_hz=100.0, duration=30.0):
+        asked.append((sorted(e["name"] for e in effects), seed, rate_hz, duration))
+        names = sorted(e["name"] for e in effects)
+        return {"flown": effects, "ended_early": False, "named": names, "named_right": True, "form_right": True,
+                "spurious": [], "param_errors": {}, "param_errors_in_std": {}, "forms_left_open": [],
+                "gap_reduction": 0.9, "rate_hz": rate_hz, "seed": seed, "runtime_s": 0.0}
+
+    monkeypatch.setattr(hidden_effects, "fly_and_discover", record_of)
+    out = tmp_path / "acceptance.json"
+    assert main(["bench-discover", "--acceptance", "--seeds", "0,2", "--json", str(out)]) == 0
+    per_seed = len(hidden_effects.FORMS) + len(hidden_effects.PAIRS) + len(CLEAN_SCENARIOS)
+    assert len(asked) == 2 * per_seed
+    assert [seed for _, seed, _, _ in asked] == [*range(per_seed), *(2000 + i for i in range(per_seed, 2 * per_seed))]
+    assert [rate for _, _, rate, _ in asked] == [RATES[i % len(RATES)] for i in range(2 * per_seed)]
+    assert {duration for *_, duration in asked} == {30.0}  # the acceptance's own default length
+    assert [names for names, *_ in asked[per_seed - len(CLEAN_SCENARIOS):per_seed]] == [[]] * len(CLEAN_SCENARIOS)
+    assert all(len(names) == 2 for names, *_ in asked[len(hidden_effects.FORMS):per_seed - len(CLEAN_SCENARIOS)])
+    payload = json.loads(out.read_text())
+    assert [r["case"] for r in payload["logs"]][-len(CLEAN_SCENARIOS):] == [f"clean {s}" for s in CLEAN_SCENARIOS]
+    hidden = 2 * (per_seed - len(CLEAN_SCENARIOS))
+    assert payload["summary"]["logs_with_hidden_effects"] == hidden
+    printed = capsys.readouterr().out.splitlines()
+    assert len(printed) == 2 * per_seed + 5  # a line per log, four of the summary, one for the file written
+    assert printed[-5] == f"named right with nothing spurious: {hidden}/{hidden} (100 %, target >= 95 %); " \
+                          f"fuller form right in {hidden}/{hidden}"

@@ -191,7 +191,7 @@ def test_discover_refuses_to_overwrite_an_input(suction_log, tmp_path, capsys):
 
 def test_discover_loads_only_what_it_uses():
     """What ``discover`` imports is part of its start-up time: none of these serves it."""
-    code = ("import sys, discovery.cli, discovery.workflow, discovery.report; "
+    code = ("import sys, wall_inspector.discover, discovery.workflow, discovery.report; "
             "print(sorted(m for m in ('scipy.signal', 'scipy.stats', 'scipy.ndimage', 'pybullet', 'torch', "
             "'stable_baselines3', 'ray', 'matplotlib', 'wall_env.env') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout

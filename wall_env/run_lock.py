@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["RunLock", "RunFolderBusy", "lock_path", "lock_run_folder"]
+__all__ = ["RunLock", "RunFolderBusy", "lock_path"]
 
 
 class RunFolderBusy(RuntimeError):
@@ -57,7 +57,7 @@ class RunLock:
         import fcntl
 
         if self._fd is not None:
-            return self  # already held by this object (``with lock_run_folder(...)`` enters an acquired lock)
+            return self  # already held by this object (``with wall_inspector.cli.lock_run_folder(...)`` enters an acquired lock)
         self.folder.mkdir(parents=True, exist_ok=True)
         fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
@@ -103,12 +103,3 @@ def _read_holder(fd: int) -> dict[str, Any] | None:
     except (OSError, ValueError):
         return None
     return data if isinstance(data, dict) else None
-
-
-def lock_run_folder(folder: str | Path, command: str) -> RunLock:
-    """:class:`RunLock` acquired now; a busy folder raises ``SystemExit`` with the one-line message (the
-    command line's usage-error form)."""
-    try:
-        return RunLock(folder, command).acquire()
-    except RunFolderBusy as exc:
-        raise SystemExit(str(exc)) from None

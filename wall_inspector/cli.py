@@ -1,8 +1,9 @@
 """``wall-inspector``: one command line for every job of the project.
 
-Each subcommand lives in the module that owns its work and exposes
-``add_arguments(parser)`` and ``run(args) -> int``; it is imported only when used,
-so ``wall-inspector bench-env`` never loads PyTorch.
+Each subcommand lives in a module of this package that exposes ``add_arguments(parser)``
+and ``run(args) -> int`` and calls the plain functions of the library packages (wall_env,
+controllers, agents, discovery), which parse, print and exit nothing; it is imported only
+when used, so ``wall-inspector bench-env`` never loads PyTorch.
 
 Usage errors look the same for every command: one line on stderr,
 ``wall-inspector COMMAND: error: MESSAGE``, and exit status 2. They come from argparse
@@ -16,7 +17,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from typing import NoReturn
+from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn
+
+if TYPE_CHECKING:
+    from wall_env.run_lock import RunLock
 
 USAGE_ERROR = 2  # exit status of every usage error (argparse's convention)
 INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT)
@@ -24,7 +29,7 @@ INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT)
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("wall_inspector.demo", "fly a short rollout near a wall, print what happened and write a picture"),
-    "bench-env": ("wall_env.benchmark", "measure environment steps per second and reset time"),
+    "bench-env": ("wall_inspector.bench_env", "measure environment steps per second and reset time"),
     "bench-mpc": ("wall_inspector.bench_mpc", "time SC-MPC solves in closed loop against IPOPT on the same problems"),
     "compare": ("wall_inspector.compare", "reproduce the paper's Tables I and II with PID, MPC and SC-MPC (tables, JSON, plots)"),
     "robustness": ("wall_inspector.robustness", "fly every method, told only the nominal model, over a grid of true worlds "
@@ -36,10 +41,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench-throughput": ("wall_inspector.bench_throughput", "training env steps per second for several vector-env layouts"),
     "notebooks": ("wall_inspector.notebooks", "run the notebooks top to bottom (and save their outputs)"),
     "readme": ("wall_inspector.readme", "copy result tables written by other commands into README.md"),
-    "import-log": ("discovery.import_log", "convert a PX4 ULog or a ROS 2 bag into the project's flight log (CSV + JSON)"),
-    "fly": ("discovery.fly", "record a flight log (CSV + JSON) from the simulator with measurement noise"),
-    "bench-discover": ("discovery.benchmark", "time discovery on a 60 s, 100 Hz log; --acceptance: its accuracy on hidden-effect logs"),
-    "discover": ("discovery.cli", "find, name and fit what the nominal model misses in flight logs; write a model file"),
+    "import-log": ("wall_inspector.import_log", "convert a PX4 ULog or a ROS 2 bag into the project's flight log (CSV + JSON)"),
+    "fly": ("wall_inspector.fly", "record a flight log (CSV + JSON) from the simulator with measurement noise"),
+    "bench-discover": ("wall_inspector.bench_discover", "time discovery on a 60 s, 100 Hz log; --acceptance: its "
+                                                        "accuracy on hidden-effect logs"),
+    "discover": ("wall_inspector.discover", "find, name and fit what the nominal model misses in flight logs; write a model file"),
     "export": ("wall_inspector.export", "write a PPO agent as ONNX, or MPC / SC-MPC as C, to fly without this package"),
     "bench-export": ("wall_inspector.bench_export", "time the exported C controller's step (C timing loop) and the ONNX "
                                                     "policy's step on the Table II flight, beside Python's predict"),
@@ -63,6 +69,17 @@ def print_usage_error(prog: str, message: str) -> int:
 def usage_error(prog: str, message: str) -> NoReturn:
     """:func:`print_usage_error`, then exit with status 2."""
     raise SystemExit(print_usage_error(prog, message))
+
+
+def lock_run_folder(folder: str | Path, command: str) -> RunLock:
+    """:class:`~wall_env.run_lock.RunLock` of ``folder`` acquired now; a busy folder is a usage error:
+    ``SystemExit`` with the one-line message naming the run that holds it."""
+    from wall_env.run_lock import RunFolderBusy, RunLock
+
+    try:
+        return RunLock(folder, command).acquire()
+    except RunFolderBusy as exc:
+        raise SystemExit(str(exc)) from None
 
 
 def _parser() -> argparse.ArgumentParser:

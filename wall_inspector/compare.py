@@ -328,7 +328,7 @@ def run(args: argparse.Namespace) -> int:
         from wall_inspector import ray_backend
 
         ray_backend.check_arguments(args)
-        from wall_env.run_lock import lock_run_folder
+        from wall_inspector.cli import lock_run_folder
 
         lock = lock_run_folder(out, "wall-inspector compare")
         signature = {k: v for k, v in sorted(vars(args).items()) if k not in ("out", "no_progress", "ray", "ray_cpus")}

@@ -121,7 +121,7 @@ def _ray_executor(address: str, cpus: int | None):
 
 def run(args: argparse.Namespace) -> int:
     seeds, worlds, workers = _checked(args)
-    from wall_env.run_lock import lock_run_folder
+    from wall_inspector.cli import lock_run_folder
 
     with lock_run_folder(args.out, "wall-inspector robustness"):
         return _run(args, seeds, worlds, workers)

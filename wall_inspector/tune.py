@@ -163,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     tuner = Tuner(objective, heldout, out, budget_trials=args.budget_trials,
                   budget_minutes=args.budget_minutes or None, seed=args.sampler_seed, space=space, command=command,
                   progress=not args.no_progress, start=args.start)
-    from wall_env.run_lock import lock_run_folder
+    from wall_inspector.cli import lock_run_folder
 
     lock = lock_run_folder(out, "wall-inspector tune")  # a second run into the folder refuses, naming this one
     try:

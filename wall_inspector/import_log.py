@@ -10,7 +10,8 @@ body frame, optional drag and thrust map), ``--scene`` its ``scene`` block (wall
 ground, ceiling in the ENU world frame of the log) and optionally ``gravity``;
 ``--topics`` is the ROS 2 topic map (:mod:`discovery.importers.ros2`). The default
 ``--out`` is ``<input name>.csv`` in the current folder. Existing files are not
-replaced unless ``--overwrite``; the input files are only read.
+replaced unless ``--overwrite``; the input files are only read. The import itself is
+:func:`discovery.importers.import_log`; this module reads the options and prints what was read.
 """
 
 from __future__ import annotations

@@ -25,7 +25,9 @@ A PX4 ULog or a ROS 2 bag is imported first (:mod:`discovery.importers`, as
 and ``--scene``. Outputs and options are checked before any work.
 
 Exit status 0 on success, 2 when a log or an argument is unusable (one line naming
-the file, column or key, and row, or the option and its allowed range).
+the file, column or key, and row, or the option and its allowed range). The work is
+:class:`discovery.Discovery`'s; this module reads the options, checks them and the outputs,
+and writes and prints the results.
 """
 
 from __future__ import annotations
