@@ -328,7 +328,9 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
           if training.get("time_split") else ()),
         *((("PyTorch threads (controllers.threads)", _threads_text(training["threads"])),)
           if training.get("threads") else ()),
-        ("domain randomisation", card.get("randomize") or "off"),
+        ("domain randomisation (per episode, uniform)", card.get("randomize") or "off"),
+        *((("flight conditions (sensing error, turbulence)", card["conditions"]),) if card.get("conditions") else ()),
+        *((("observation history", card["history"]),) if card.get("history") else ()),
         ("seed", training.get("seed")),
         ("machine", training.get("machine")),
         ("git commit", _git_text(training)),
@@ -340,9 +342,24 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
     if metrics:
         lines += ["| metric | value |", "| --- | --- |"]
         lines += [f"| {name} | {_fmt(value)} |" for name, value in metrics.items()]
+    robustness = card.get("robustness")
+    if robustness:
+        lines += ["", "## Robustness", "", robustness.get("text", "")]
     lines += ["", "Hyperparameters and every other setting: `model_card.json` (`config`).", ""]
     md_path.write_text("\n".join(lines))
     return json_path, md_path
+
+
+def set_robustness(folder: str | Path, text: str, data: dict[str, Any]) -> Path:
+    """Put a robustness measurement (``text``: Markdown; ``data``: its figures) into the model card in
+    ``folder`` (``robustness`` in ``model_card.json``, a section of ``model_card.md``), replacing any earlier."""
+    folder = Path(folder)
+    card = read_json(folder / CARD_JSON)
+    if not isinstance(card, dict):
+        raise ValueError(f"{folder / CARD_JSON}: not a model card")
+    card["robustness"] = {"text": text, **data}
+    write_model_card(folder, card)
+    return folder / CARD_MD
 
 
 def training_env_steps(training: dict[str, Any]) -> int:

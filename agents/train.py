@@ -474,6 +474,8 @@ def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None,
             else "(the final model: no evaluation ran during training)"),
         "residual": config["residual"],
         "randomize": {k: list(v) for k, v in config["randomize_ranges"].items()} if config["randomize"] else None,
+        "conditions": config["env_kwargs"].get("conditions"),  # the flight conditions trained in (scaled per episode)
+        "history": config.get("history"),
         "training": training,
         "evaluation": {
             "scenario": (f"controllers.evaluation.evaluate (the function of the comparison tables): {len(seeds)} "

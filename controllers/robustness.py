@@ -42,7 +42,7 @@ from controllers.mpc.policy import MPC, PAPER_SUCTION, SCMPC
 from controllers.pid import PID
 
 __all__ = ["World", "Method", "Controller", "ToldTheTruth", "DEFAULT_GRID", "default_methods", "authors_methods",
-           "CellResult", "fly_cell", "run_grid", "acceptance", "markdown_report", "plot_heatmap", "results_json",
+           "CellResult", "fly_cell", "run_grid", "acceptance", "markdown_report", "method_report", "plot_heatmap", "results_json",
            "ENV_ID", "PAPER_TABLE_II_RMSE_X"]
 
 ENV_ID = "WallInspector/WallSweep-v0"
@@ -379,6 +379,24 @@ def markdown_report(results: Sequence[CellResult], seeds: Sequence[int], checks:
     if seconds is not None:
         out.append(f"The whole grid ({len(results)} cells of {len(seeds)} flights) took {seconds / 60:.1f} min.")
     return "\n".join(out)
+
+
+def method_report(results: Sequence[CellResult], method: str, seeds: Sequence[int],
+                  checks: Sequence[dict[str, Any]] = ()) -> str:
+    """One method's row of the grid as a Markdown table beside the reference (SC-MPC told the truth), and the
+    checks that name it: what a model card says about how the agent holds when the world is not the nominal one."""
+    worlds = [w for w in dict.fromkeys(r.world for r in results) if _find(results, w, method) is not None]
+    out = [f"`wall-inspector robustness` on `{ENV_ID}`, {len(seeds)} seeds a cell ({', '.join(map(str, seeds))}), "
+           f"told nothing of the world it flies in (the reference, SC-MPC, is told each world's true suction and "
+           "push). Wall-normal RMSE (cm), then flights with wall contact when any.\n",
+           f"| world | {method} | SC-MPC told the truth |", "|---|---:|---:|"]
+    out += [f"| {w.label} | {_cell_text(_find(results, w, method))} | {_cell_text(_find(results, w, REFERENCE))} |"
+            for w in worlds]
+    mine = [c for c in checks if c["check"].startswith(f"{method},") or c["check"].startswith(f"{method}:")]
+    if mine:
+        out += ["", *[f"- {'pass' if c['pass'] else 'FAIL'}: {c['check']}" + (f" [{c['world']}]" if c.get("world") else "")
+                      + f" (measured {c['value']})" for c in mine]]
+    return "\n".join(out) + "\n"
 
 
 def results_json(results: Sequence[CellResult], seeds: Sequence[int], checks: Sequence[dict[str, Any]],

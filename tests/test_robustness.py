@@ -75,12 +75,35 @@ def test_the_command_writes_the_table_json_and_heat_map(tmp_path):
     assert (out / "robustness.png").stat().st_size > 10_000
 
 
+def test_the_card_option_writes_the_agents_rows_into_its_model_card(tmp_path):
+    import shutil
+
+    from agents import pretrained_path
+
+    agent = tmp_path / "agent"
+    shutil.copytree(pretrained_path("WallSweep-v0"), agent)
+    shipped = {p.name: p.read_bytes() for p in agent.iterdir() if not p.name.startswith("model_card")}
+    code = cli_main(["robustness", "--groups", "realistic", "--seeds", "3", "--duration", "0.3", "--no-authors",
+                     "--ppo", str(agent), "--card", "--workers", "1", "--no-progress", "--out", str(tmp_path / "rob")])
+    assert code == 0
+    grid = json.loads((tmp_path / "rob" / "robustness.json").read_text())
+    ppo = next(c for c in grid["cells"] if c["method"] == "PPO")
+    card = json.loads((agent / "model_card.json").read_text())
+    assert card["robustness"]["seeds"] == [3]
+    assert {c["check"] for c in card["robustness"]["checks"]} == {
+        c["check"] for c in grid["checks"] if c["check"].startswith("PPO")}
+    text = (agent / "model_card.md").read_text()
+    assert "## Robustness" in text and f"| realistic profile | {100 * ppo['metrics']['wall_normal_rmse']:.2f}" in text
+    assert {p.name: p.read_bytes() for p in agent.iterdir() if not p.name.startswith("model_card")} == shipped
+
+
 @pytest.mark.parametrize("args, message", [
     (["--groups", "wind"], "--groups must name some of"),
     (["--seeds", "x"], "--seeds must be seeds such as"),
     (["--duration", "0"], "--duration must be in [0.05, 60] s"),
     (["--ppo", "/nonexistent/agent"], "/nonexistent/agent"),
     (["--workers", "0"], "--workers must be in [1, 256]"),
+    (["--no-ppo", "--card"], "--card writes the PPO agent's results into its model card"),
 ])
 def test_bad_options_are_one_line_usage_errors(tmp_path, capsys, args, message):
     assert cli_main(["robustness", "--out", str(tmp_path / "x"), *args]) == 2

@@ -55,6 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ppo", default="WallSweep-v0", metavar="AGENT",
                         help="the PPO agent: a task name for the shipped agent (default) or a checkpoint folder")
     parser.add_argument("--no-ppo", action="store_true", help="leave out the PPO agent")
+    parser.add_argument("--card", action="store_true",
+                        help="write the PPO agent's rows and checks into its model card (model_card.md and .json)")
     parser.add_argument("--no-authors", action="store_true",
                         help="leave out the authors' settings under the realistic profile")
     parser.add_argument("--duration", type=float, default=None,
@@ -94,6 +96,10 @@ def _checked(args: argparse.Namespace) -> tuple[list[int], list[World], int]:
             folder = _resolve(args.ppo)  # a task name without a shipped agent raises here
             if not (folder / "model.zip").is_file():
                 raise ValueError(f"--ppo {args.ppo}: no agent there ({folder / 'model.zip'} does not exist)")
+            if args.card and not (folder / "model_card.json").is_file():
+                raise ValueError(f"--card: {folder} has no model_card.json to write into")
+        elif args.card:
+            raise ValueError("--card writes the PPO agent's results into its model card; it cannot go with --no-ppo")
     except (ValueError, FileNotFoundError) as exc:
         raise SystemExit(str(exc)) from None
     return seeds, [w for w in DEFAULT_GRID if w.group in chosen], workers
@@ -146,4 +152,13 @@ def _run(args: argparse.Namespace, seeds: list[int], worlds: list[World], worker
     text, checks = write_outputs(results, seeds, args.out, seconds)
     print(text)
     print(f"wrote {Path(args.out) / 'robustness.md'}, robustness.json and robustness.png")
+    if args.card:
+        from agents.checkpoints import set_robustness
+        from agents.policy import _resolve
+        from controllers.robustness import method_report
+
+        card = set_robustness(_resolve(args.ppo), method_report(results, "PPO", seeds, checks),
+                              {"seeds": [int(s) for s in seeds],
+                               "checks": [c for c in checks if c["check"].startswith("PPO")]})
+        print(f"wrote the PPO rows into {card}")
     return 0
