@@ -122,6 +122,53 @@ def test_refuses_to_overwrite_a_run(cli_run, capsys):
     assert "already holds a run" in capsys.readouterr().err
 
 
+def _stopped_early(out, argv):
+    """A run folder as a run leaves it when it dies before its first checkpoint: its configuration, an empty
+    TensorBoard folder, no model (what ``train --seed -1`` once left, or a Ctrl-C while its envs were built)."""
+    from wall_inspector.train import _config_from_args, _training_arguments
+
+    parser = __import__("argparse").ArgumentParser()
+    _training_arguments(parser)
+    config = _config_from_args(parser.parse_args(argv))
+    out.mkdir(parents=True)
+    (out / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    (out / "tb" / "ppo_1").mkdir(parents=True)
+    (out / "tb" / "ppo_1" / "events.out.tfevents.0.first-attempt").write_bytes(b"")
+
+
+def test_a_run_stopped_before_its_first_checkpoint_starts_again_by_the_same_command_or_resume(tmp_path, capsys):
+    argv = ["--env", "WallInspector/WallHover-v0", "--timesteps", "2048", "--n-envs", "4", "--seed", "5", *TINY]
+    for k, how in enumerate((["--out"], ["--resume"])):
+        out = tmp_path / f"run{k}"
+        _stopped_early(out, [*argv, "--out", str(out)])
+        again = ["train", *argv, "--out", str(out)] if how == ["--out"] else ["train", "--resume", str(out), "--quiet",
+                                                                               "--no-progress"]
+        assert main(again) == 0
+        assert "stopped before its first checkpoint; starting it again" in capsys.readouterr().err
+        assert json.loads((out / "policy.json").read_text())["num_timesteps"] == 2048
+        assert not list((out / "tb").rglob("*first-attempt"))  # the first attempt's log is gone, not mixed in
+    # another configuration into such a folder is refused, and nothing in it changes
+    out = tmp_path / "run2"
+    _stopped_early(out, [*argv, "--out", str(out)])
+    saved = (out / "config.yaml").read_bytes()
+    assert main(["train", *argv[:-len(TINY)], "--set", "ppo.n_epochs=3", *TINY[6:], "--out", str(out)]) == 2
+    assert "another configuration that stopped before its first checkpoint" in capsys.readouterr().err
+    assert (out / "config.yaml").read_bytes() == saved
+
+
+def test_a_second_run_into_a_folder_in_use_refuses_and_changes_nothing(cli_run, capsys):
+    from wall_env.run_lock import RunLock
+
+    before = {p: p.read_bytes() for p in cli_run.rglob("*") if p.is_file()}
+    with RunLock(cli_run, "wall-inspector train"):  # a run holding the folder, as a running train does
+        for argv in (["--resume", str(cli_run), "--timesteps", "9000"],
+                     ["--env", "WallHover-v0", "--out", str(cli_run), "--timesteps", "4096"]):
+            assert main(["train", *argv]) == 2
+            err = capsys.readouterr().err
+            assert "is in use by 'wall-inspector train'" in err and len(err.strip().splitlines()) == 1
+    assert {p: p.read_bytes() for p in cli_run.rglob("*") if p.is_file()} == before
+
+
 def test_loaded_policy_acts_exactly_like_the_trained_model(tmp_path, capsys):
     config = default_config("WallCircle")
     config.update(timesteps=1024, n_envs=2, n_workers=1, checkpoint_freq=0)

@@ -160,6 +160,14 @@ def _resumed_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
     if changing:
         raise ValueError(f"--resume continues the saved configuration; drop {', '.join(changing)}")
     config = load_config(run_dir / "config.yaml", validate=False)
+    if _stopped_before_first_checkpoint(run_dir):  # nothing to continue: the saved configuration starts again
+        for key, value in (("timesteps", args.timesteps), ("n_workers", args.workers),
+                           ("checkpoint_freq", args.checkpoint_freq), ("checkpoint_minutes", args.checkpoint_minutes)):
+            if value is not None:
+                config[key] = value
+        validate_config(config)
+        planned_timesteps(config)
+        return config, run_dir
     if config.get("algo") == "dagger":
         raise ValueError(f"{run_dir} holds a distilled agent (algo dagger): it has no PPO steps to continue; "
                          "train a new run")
@@ -180,16 +188,68 @@ def _new_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
     if not args.out:
         raise ValueError("--out is required (the run folder)")
     out = Path(args.out)
-    if (out / "config.yaml").exists():
-        raise ValueError(f"{out} already holds a run; continue it with --resume {out} or choose another --out")
     config = _config_from_args(args)
+    if (out / "config.yaml").exists():
+        if not _stopped_before_first_checkpoint(out):
+            raise ValueError(f"{out} already holds a run; continue it with --resume {out} or choose another --out")
+        saved = load_config(out / "config.yaml", validate=False)
+        if saved != config:
+            raise ValueError(f"{out} holds a run with another configuration that stopped before its first checkpoint; "
+                             "choose another --out, or delete the folder to start there afresh")
     planned_timesteps(config)
     check_output_folder(out, "--out")
     return config, out
 
 
+# what a run writes before its first checkpoint; all of it is the run's own, remade when it starts again
+_EARLY_FILES = ("config.yaml", "tb", "eval", "best", "checkpoints", "demonstrations")
+
+
+def _stopped_before_first_checkpoint(run_dir: Path) -> bool:
+    """``run_dir`` holds a run (its ``config.yaml``) that ended, by Ctrl-C or a crash, before it saved any
+    model: nothing to continue, so the same command (or ``--resume``) starts it again."""
+    from agents.checkpoints import CheckpointNotFoundError
+
+    if not (run_dir / "config.yaml").is_file():
+        return False
+    try:
+        _latest_checkpoint(run_dir)
+    except CheckpointNotFoundError:
+        return True
+    return False
+
+
+def _clear_early_files(run_dir: Path) -> None:
+    import shutil
+
+    for name in _EARLY_FILES:
+        path = run_dir / name
+        if path.is_dir():
+            shutil.rmtree(path)
+        elif path.exists():
+            path.unlink()
+
+
 def run_single(args: argparse.Namespace) -> int:
-    """One training run (:func:`agents.train.train`) from the arguments, its figures printed."""
+    """One training run (:func:`agents.train.train`) from the arguments, its figures printed; the run folder
+    is locked for as long as the run lasts (a second run into it refuses, naming this one)."""
+    from wall_inspector.cli import lock_run_folder
+
+    folder = args.resume or args.out
+    try:
+        if folder:
+            check_output_folder(Path(folder), "--resume" if args.resume else "--out")
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
+    lock = lock_run_folder(folder, "wall-inspector train") if folder else None
+    try:
+        return _run_single(args)
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _run_single(args: argparse.Namespace) -> int:
     try:
         config, out = _usage(args)
         checks = check_observations(config)  # builds the env once: settings it refuses stop the command here
@@ -204,10 +264,14 @@ def run_single(args: argparse.Namespace) -> int:
         rollout = config["n_envs"] * config["ppo"]["n_steps"]
         print(f"training {planned // rollout} whole PPO rollouts of {rollout} env steps = {planned} of the "
               f"{config['timesteps']} requested", file=sys.stderr)
-    if args.resume:
+    restart = _stopped_before_first_checkpoint(out)
+    if restart:
+        print(f"{out}: the run there stopped before its first checkpoint; starting it again", file=sys.stderr)
+        _clear_early_files(out)
+    elif args.resume:
         print(f"resuming {out} from its latest checkpoint", file=sys.stderr)
     try:
-        result = train(config, out, resume=bool(args.resume), progress_bar=not args.no_progress,
+        result = train(config, out, resume=bool(args.resume) and not restart, progress_bar=not args.no_progress,
                        verbose=0 if args.quiet else 1, command=_command(args, config), checks=checks)
     except TrainingInterrupted as stop:
         print(f"\ninterrupted at {stop.num_timesteps} env steps: model, normalisation statistics and step count saved "
