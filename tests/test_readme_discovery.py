@@ -42,6 +42,9 @@ def test_the_discovery_example_finds_the_hidden_suction(tmp_path):
     params = report["effects"][0]["params"]
     assert params["k_s"] == pytest.approx(4.1, rel=0.1) and params["d_thr"] == pytest.approx(0.132, rel=0.1)
     assert report["gap_after"]["force_rms_N"] < 0.3 * report["gap_before"]["force_rms_N"]
+    # what the page says: the residual falls to the log's noise floor ("within noise": within 1.5 times it)
+    assert report["unexplained"] is None
+    assert report["gap_after"]["force_rms_N"] <= 1.5 * report["noise"]["floor_N"]
 
 
 def test_the_px4_example_imports_and_discovers(tmp_path):
