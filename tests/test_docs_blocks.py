@@ -80,7 +80,7 @@ def _run_command(command: str, cwd: Path, block: Block) -> str:
     if program == "ray":
         if argv[1:2] == ["start"]:
             for option in (a.split("=")[0] for a in argv[2:] if a.startswith("--")):
-                assert re.search(rf"^\s+{re.escape(option)}\b", _ray_start_help(), re.M), \
+                assert re.search(rf"^\s+{re.escape(option)}(?=[\s,=])", _ray_start_help(), re.M), \
                     f"{block.where}: ray start has no option {option}"
         else:
             assert argv[1:] == ["stop"], f"{block.where}: {command}"
