@@ -17,11 +17,10 @@ SWEEP = "WallInspector/WallSweep-v0"
 
 
 def _readme_snippet(containing: str) -> str:
-    from pathlib import Path
+    """The documented Python block holding ``containing`` (docs/guide/agents.md), as printed."""
+    from tests.docs_pages import block_containing
 
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
-    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)
-    return next(block for block in blocks if containing in block)
+    return block_containing(containing, "python").code
 
 
 def test_shipped_agent_flies_with_the_readmes_plain_stable_baselines3_loading(monkeypatch):

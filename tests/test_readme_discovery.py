@@ -1,10 +1,9 @@
-"""The README's discovery commands, run exactly as printed."""
+"""The discovery commands of the documentation (docs/guide/discovery.md), run exactly as printed."""
 
 from __future__ import annotations
 
 import json
 import os
-import re
 import shlex
 import shutil
 import subprocess
@@ -13,17 +12,12 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-README = ROOT / "README.md"
+from tests.docs_pages import ROOT, block_under, shell_commands
 
 
 def _commands(section: str) -> list[str]:
-    """The lines of the first bash block under the README heading ``section`` (comments dropped)."""
-    text = README.read_text()
-    start = text.index(f"### {section}")
-    block = re.search(r"```bash\n(.*?)```", text[start:], re.S).group(1)
-    return [line.split("  #")[0].strip() for line in block.splitlines()
-            if line.strip() and not line.lstrip().startswith("#")]
+    """The commands of the first bash block under the heading ``section`` (README or docs; comments dropped)."""
+    return shell_commands(block_under(section, "bash").code)
 
 
 def _run(commands: list[str], cwd: Path) -> list[str]:
@@ -48,6 +42,9 @@ def test_the_discovery_example_finds_the_hidden_suction(tmp_path):
     params = report["effects"][0]["params"]
     assert params["k_s"] == pytest.approx(4.1, rel=0.1) and params["d_thr"] == pytest.approx(0.132, rel=0.1)
     assert report["gap_after"]["force_rms_N"] < 0.3 * report["gap_before"]["force_rms_N"]
+    # what the page says: the residual falls to the log's noise floor ("within noise": within 1.5 times it)
+    assert report["unexplained"] is None
+    assert report["gap_after"]["force_rms_N"] <= 1.5 * report["noise"]["floor_N"]
 
 
 def test_the_px4_example_imports_and_discovers(tmp_path):
@@ -62,4 +59,8 @@ def test_the_px4_example_imports_and_discovers(tmp_path):
     assert "read PX4 ULog" in imported and "thrust map: motor_command" in imported
     report = json.loads((tmp_path / "sitl-results" / "report.json").read_text())
     assert report["limits"] and report["notes"]
+    # what the page says it finds: a thrust scale a few per cent above 1 that halves the held-out force residual
+    assert [e["name"] for e in report["effects"]] == ["thrust_scale"], summary
+    assert 1.0 < report["effects"][0]["params"]["scale"] < 1.05
+    assert report["gap_after"]["force_rms_N"] < 0.5 * report["gap_before"]["force_rms_N"]
     assert "cannot determine wall_suction: the scene has no wall" in summary

@@ -1,9 +1,10 @@
-"""``wall-inspector readme``: put result tables that commands wrote into README.md.
+"""``wall-inspector readme``: put result tables that commands wrote into README.md and the docs.
 
 Result commands write Markdown files (``bench-env --markdown``, ``bench-mpc
 --markdown``, ``compare --out``); this command copies them between markers in the
-README, and ``--agents`` tabulates the model cards that ``train --ship`` wrote, so no
-figure in the README is typed by hand::
+README and the pages of ``docs/`` (:mod:`wall_inspector.readme_pages`: where blocks
+stand, the headlines cut from them), and ``--agents`` tabulates the model cards that
+``train --ship`` wrote, so no figure in the README or the documentation is typed by hand::
 
     <!-- BEGIN bench-env -->
     ...replaced...
@@ -15,7 +16,10 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import shutil
 from pathlib import Path
+
+from wall_inspector.readme_pages import Page, relink, with_figure
 
 
 def replace_block(text: str, name: str, content: str) -> str:
@@ -79,9 +83,11 @@ def agents_table(pretrained: Path) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--readme", default="README.md", help="the README to update (default README.md)")
+    parser.add_argument("--readme", default="README.md",
+                        help="the README to update; the pages of the docs/ folder beside it are updated too (default README.md)")
     parser.add_argument("--set", dest="blocks", action="append", default=[], metavar="NAME=FILE",
-                        help="replace block NAME with the Markdown in FILE (repeatable)")
+                        help="replace block NAME, wherever it stands, with the Markdown in FILE (repeatable); the blocks "
+                             "cut from it follow, and a picture beside FILE with its name and .png goes into docs/NAME.png")
     parser.add_argument("--agents", action="store_true",
                         help="replace block 'agents' with a table of the shipped agents' model cards")
 
@@ -93,23 +99,62 @@ def _read(path: Path, argument: str) -> str:
         raise SystemExit(f"{argument}: cannot read {path} ({exc.strerror or exc})") from None
 
 
+def _fill(pages: list[Page], root: Path, name: str, content: str, source: str, figure: Path | None = None) -> list[str]:
+    """Put ``content`` into block ``name`` of every page that holds it; the lines to print."""
+    done = []
+    for page in pages:
+        if name in page.names:
+            text = with_figure(relink(content, page.path, root), name, figure, page.path, root)
+            page.text = replace_block(page.text, name, text)
+            page.changed = True
+            done.append(f"{page.path}: block {name!r} <- {source}")
+    return done
+
+
 def run(args: argparse.Namespace) -> int:
+    from wall_inspector.readme_pages import DERIVED, read_pages
+
     path = Path(args.readme)
-    text = _read(path, f"--readme {path}")  # every input is read and every block found before the README is written
+    root = path.parent
+    # every input is read and every block found before any page is written
+    pages = read_pages(path, _read)
+    held = set().union(*(page.names for page in pages))
+    report: list[str] = []
+    figures: list[tuple[Path, Path]] = []
     for item in args.blocks:
         name, sep, file = item.partition("=")
         if not sep:
             raise SystemExit(f"--set takes NAME=FILE, got {item!r}")
-        try:
-            text = replace_block(text, name, _read(Path(file), f"--set {item}"))
-        except ValueError as exc:
-            raise SystemExit(f"--set {item}: {exc}") from None
-        print(f"{path}: block {name!r} <- {file}")
+        content = _read(Path(file), f"--set {item}")
+        if name not in held:
+            raise SystemExit(f"--set {item}: README has no block '<!-- BEGIN {name} -->' ... '<!-- END {name} -->', "
+                             f"nor has any page under {root / 'docs'}")
+        picture = Path(file).with_suffix(".png")
+        figure = root / "docs" / f"{name}.png" if picture.is_file() and picture != Path(file) else None
+        if figure is not None:
+            figures.append((picture, figure))
+        report += _fill(pages, root, name, content, file, figure)
+        for derived, (source, cut) in DERIVED.items():
+            if source == name and derived in held:
+                try:
+                    part = cut(content)
+                except ValueError as exc:
+                    raise SystemExit(f"--set {item}: {file} {exc} (block {derived!r} is cut from it)") from None
+                report += _fill(pages, root, derived, part, f"{file} (cut)")
     if args.agents:
         from agents.policy import PRETRAINED_DIR
 
-        text = replace_block(text, "agents", agents_table(PRETRAINED_DIR.relative_to(Path.cwd())
-                                                          if PRETRAINED_DIR.is_relative_to(Path.cwd()) else PRETRAINED_DIR))
-        print(f"{path}: block 'agents' <- {PRETRAINED_DIR}/*/model_card.json")
-    path.write_text(text)
+        if "agents" not in held:
+            raise SystemExit(f"--agents: README has no block '<!-- BEGIN agents -->', nor has any page under {root / 'docs'}")
+        pretrained = PRETRAINED_DIR.relative_to(Path.cwd()) if PRETRAINED_DIR.is_relative_to(Path.cwd()) else PRETRAINED_DIR
+        report += _fill(pages, root, "agents", agents_table(pretrained), f"{PRETRAINED_DIR}/*/model_card.json")
+    for picture, figure in figures:
+        figure.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(picture, figure)
+        report.append(f"{figure} <- {picture}")
+    for page in pages:
+        if page.changed:
+            page.path.write_text(page.text)
+    for line in report:
+        print(line)
     return 0
