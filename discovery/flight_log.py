@@ -281,21 +281,12 @@ def _check_shape(log: FlightLog, name: str, shape: tuple[int, ...]) -> None:
 
 
 def quaternions_to_matrices(q: np.ndarray) -> np.ndarray:
-    """``R_body_to_world`` ``(n, 3, 3)`` of quaternions ``(n, 4)`` [w, x, y, z] (normalised first)."""
+    """``R_body_to_world`` ``(n, 3, 3)`` of quaternions ``(n, 4)`` [w, x, y, z], normalised first
+    (a log's quaternions are unit only to its precision); :func:`wall_env.rotations.quat_to_rotation_rows`."""
+    from wall_env.rotations import quat_to_rotation_rows
+
     q = np.asarray(q, dtype=float)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    w, x, y, z = q.T
-    R = np.empty((len(q), 3, 3))
-    R[:, 0, 0] = 1 - 2 * (y * y + z * z)
-    R[:, 0, 1] = 2 * (x * y - w * z)
-    R[:, 0, 2] = 2 * (x * z + w * y)
-    R[:, 1, 0] = 2 * (x * y + w * z)
-    R[:, 1, 1] = 1 - 2 * (x * x + z * z)
-    R[:, 1, 2] = 2 * (y * z - w * x)
-    R[:, 2, 0] = 2 * (x * z - w * y)
-    R[:, 2, 1] = 2 * (y * z + w * x)
-    R[:, 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
+    return quat_to_rotation_rows(q / np.linalg.norm(q, axis=1, keepdims=True))
 
 
 def sidecar_path(csv_path: str | Path) -> Path:
