@@ -64,6 +64,9 @@ class World:
     push: tuple[float, float, float] = (0.0, 0.0, 0.0)  # N, world frame
     conditions: Any = None  # wall_env.conditions spec
 
+    def __hash__(self) -> int:  # by name: ``conditions`` may be a dict; labels are unique within a grid
+        return hash((self.group, self.label))
+
     def env_kwargs(self, duration: float | None = None) -> dict[str, Any]:
         kwargs: dict[str, Any] = {**BASE_KWARGS, "k_s": self.k_s, "d_thr": self.d_thr}
         if any(self.push):

@@ -28,6 +28,18 @@ def test_the_grid_holds_every_world_the_issue_names():
     assert toward.push == (-1.0, -0.0, -0.0) and toward.env_kwargs()["effects"]["constant_force"]["F"][0] == -1.0
 
 
+def test_every_world_of_the_grid_can_key_the_results_and_the_checks_run_over_all_of_them():
+    from controllers.robustness import CellResult, acceptance, markdown_report
+
+    assert len({w: w.label for w in DEFAULT_GRID}) == len(DEFAULT_GRID) == len({w.label for w in DEFAULT_GRID})
+    metrics = {"wall_normal_rmse": 0.002, "collision_episodes": 0, "episodes": 5}
+    results = [CellResult(w, m, metrics, [], 0.0) for w in DEFAULT_GRID
+               for m in ("MPC", "SC-MPC adaptive", "SC-MPC told the truth", "PPO")]
+    checks = acceptance(results)
+    assert checks and all(c["pass"] for c in checks if "0.1 cm" not in c["check"])
+    assert markdown_report(results, [1], checks).count("\n| ") >= len(DEFAULT_GRID)
+
+
 def test_the_checks_hold_the_adaptive_controller_and_ppo_to_the_reference():
     strong = World("suction", "k_s 12, d_thr 0.16", k_s=12.0, d_thr=0.16)
     nominal = World("suction", "k_s 4.1, d_thr 0.132")
