@@ -241,24 +241,27 @@ def run_single(args: argparse.Namespace) -> int:
             check_output_folder(Path(folder), "--resume" if args.resume else "--out")
     except ValueError as exc:
         raise SystemExit(str(exc)) from None
-    lock = lock_run_folder(folder, "wall-inspector train") if folder else None
+    # a folder in use is refused first; a new folder is created (by its lock) only once every setting is checked
+    lock = lock_run_folder(folder, "wall-inspector train") if folder and Path(folder).exists() else None
     try:
-        return _run_single(args)
+        try:
+            config, out = _usage(args)
+            checks = check_observations(config)  # builds the env once: settings it refuses stop the command here
+            if config["randomize"]:  # and once with the randomisation ranges
+                from agents.envs import make_env
+
+                make_env(config, monitor=False).close()
+        except (ValueError, FileNotFoundError) as exc:
+            raise SystemExit(str(exc)) from None
+        if folder and lock is None:
+            lock = lock_run_folder(folder, "wall-inspector train")
+        return _run_single(args, config, out, checks)
     finally:
         if lock is not None:
             lock.release()
 
 
-def _run_single(args: argparse.Namespace) -> int:
-    try:
-        config, out = _usage(args)
-        checks = check_observations(config)  # builds the env once: settings it refuses stop the command here
-        if config["randomize"]:  # and once with the randomisation ranges
-            from agents.envs import make_env
-
-            make_env(config, monitor=False).close()
-    except (ValueError, FileNotFoundError) as exc:
-        raise SystemExit(str(exc)) from None
+def _run_single(args: argparse.Namespace, config: dict[str, Any], out: Path, checks: Any) -> int:
     planned = planned_timesteps(config) if not args.resume else None
     if planned is not None and planned < config["timesteps"]:
         rollout = config["n_envs"] * config["ppo"]["n_steps"]
