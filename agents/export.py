@@ -192,7 +192,7 @@ def export_onnx(source: str | Path | TrainedPolicy, path: str | Path) -> Path:
         onnx.save(model, str(draft))
         observations = _check_observations(policy)  # the network's inputs (history features, if it has one)
         expected, _ = policy.model.predict(policy.normalize(observations), deterministic=True)
-        actions, _ = OnnxPolicy(draft).predict(observations)
+        actions = OnnxPolicy(draft).run_network(observations)
         worst = float(np.max(np.abs(actions - expected)))
         if not worst <= TOLERANCE:
             raise RuntimeError(f"the ONNX graph of {source} differs from the Python agent by {worst:.3g} "
@@ -221,27 +221,50 @@ class OnnxPolicy:
         options.log_severity_level = 3
         self.session = onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
         self.metadata = dict(self.session.get_modelmeta().custom_metadata_map)
-        self.observation_size = int(self.session.get_inputs()[0].shape[1])
+        self.input_size = int(self.session.get_inputs()[0].shape[1])  # the network's inputs
+        self.memory: Any = None
+        history = json.loads(self.metadata.get("history") or "null")
+        if history:  # the agent remembers: predict keeps its history, as the Python policy does
+            from agents.history import FlightMemory, HistorySettings
+
+            settings = HistorySettings.from_spec(history)
+            self.memory = FlightMemory(settings, settings.observation_size(self.input_size))
+        self.observation_size = self.input_size if self.memory is None else self.memory.observation_size
         self.path = path
 
     def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, Any]:
-        """Actions for one observation ``(obs_size,)`` or a batch ``(n, obs_size)`` (float32)."""
+        """Actions for one env observation ``(obs_size,)`` or a batch ``(n, obs_size)`` (float32); an agent with
+        a history remembers each row's observations between calls, as :class:`~agents.policy.TrainedPolicy` does,
+        and a non-finite row gets the hover action (zero)."""
         obs = np.asarray(observation, dtype=np.float32)
         if obs.shape[-1:] != (self.observation_size,) or obs.ndim > 2:
             raise ValueError(f"observation must have shape ({self.observation_size},) or (n, {self.observation_size}), "
                              f"got {obs.shape}")
-        (actions,) = self.session.run(["action"], {"observation": obs.reshape(-1, self.observation_size)})
+        rows = obs.reshape(-1, self.observation_size)
+        if self.memory is None:  # the graph itself gives hover for a non-finite row
+            (actions,) = self.session.run(["action"], {"observation": rows})
+        else:
+            inputs = self.memory(rows, episode_start).astype(np.float32)
+            (actions,) = self.session.run(["action"], {"observation": inputs})
+            actions[~np.all(np.isfinite(rows), axis=1)] = 0.0
         return (actions[0] if obs.ndim == 1 else actions), state
+
+    def run_network(self, inputs: np.ndarray) -> np.ndarray:
+        """The graph's actions ``(n, 4)`` for the network's own inputs ``(n, input_size)`` (history features
+        when the agent has a history; nothing remembered)."""
+        (actions,) = self.session.run(["action"], {"observation": np.asarray(inputs, dtype=np.float32).reshape(
+            -1, self.input_size)})
+        return np.asarray(actions)
 
     def __repr__(self) -> str:
         return f"OnnxPolicy({self.path}, {json.dumps(self.metadata.get('env_id'))})"
 
 
 def time_onnx_steps(policy: OnnxPolicy, observations: np.ndarray) -> np.ndarray:
-    """Seconds of each ``session.run`` on one observation ``(1, obs_size)`` of ``observations`` (wall clock),
-    after one untimed call; the inputs are prepared before the clock starts."""
-    batch = np.ascontiguousarray(np.asarray(observations, dtype=np.float32).reshape(-1, 1, policy.observation_size))
+    """Seconds of each ``session.run`` on one row ``(1, input_size)`` of the network's inputs ``observations``
+    (wall clock), after one untimed call; the inputs are prepared before the clock starts."""
+    batch = np.ascontiguousarray(np.asarray(observations, dtype=np.float32).reshape(-1, 1, policy.input_size))
     session = policy.session
     session.run(["action"], {"observation": batch[0]})
     seconds = np.empty(len(batch))
@@ -280,13 +303,16 @@ def measure_onnx_policy(source: str | Path | TrainedPolicy, folder: str | Path, 
             done = terminated or truncated
     finally:
         env.close()
-    inputs = np.asarray(observations)
+    inputs = np.asarray(observations, dtype=np.float32)
     if policy.history is not None:  # the network's inputs: the flight's observations through a fresh history
         from agents.history import ObservationHistory
 
         history = ObservationHistory(policy.history.settings, policy.history.observation_size)
         inputs = np.vstack([history(row[None], np.array([k == 0]))[0] for k, row in enumerate(inputs)])
-    onnx_actions, _ = onnx_policy.predict(inputs)
+        onnx_actions = np.vstack([onnx_policy.predict(row, episode_start=np.array([k == 0]))[0]
+                                  for k, row in enumerate(np.asarray(observations, dtype=np.float32))])
+    else:
+        onnx_actions, _ = onnx_policy.predict(inputs)
     return {
         "agent": str(policy.path or source),
         "env": scenario.env_id,

@@ -30,7 +30,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from wall_env.observation import OBSERVATION_FIELDS, OBSERVATION_SIZE
 from wall_env.validation import check_range
 
-__all__ = ["HistorySettings", "ObservationHistory", "VecObservationHistory"]
+__all__ = ["FlightMemory", "HistorySettings", "ObservationHistory", "VecObservationHistory"]
 
 _P_ERROR = OBSERVATION_FIELDS["p_error"]
 
@@ -143,6 +143,46 @@ class ObservationHistory:
             self._integral[starts] = self.settings.control_dt * error[starts]
             parts.append(self._integral.astype(np.float32))
         return np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
+
+
+class FlightMemory:
+    """A flying policy's :class:`ObservationHistory`: it takes the env's observations as they come
+    and finds the episode starts itself (a batch of another size, time going back, a row after a
+    non-finite observation, or ``episode_start``). A non-finite row is remembered as zeros and
+    begins afresh at its next finite observation. :class:`~agents.policy.TrainedPolicy` and
+    :class:`~agents.export.OnnxPolicy` keep one each, so both give the network the same inputs."""
+
+    def __init__(self, settings: HistorySettings, observation_size: int = OBSERVATION_SIZE):
+        self.history = ObservationHistory(settings, observation_size)
+        self._last_time = np.zeros(0)
+        self._restart = np.zeros(0, dtype=bool)
+
+    @property
+    def settings(self) -> HistorySettings:
+        return self.history.settings
+
+    @property
+    def observation_size(self) -> int:
+        return self.history.observation_size
+
+    def __call__(self, observations: np.ndarray, episode_start: Any = None) -> np.ndarray:
+        """The network's inputs ``(n, size)`` for env observations ``(n, observation_size)``."""
+        from wall_env.observation import OBSERVATION_FIELDS
+
+        obs = np.asarray(observations, dtype=np.float32)
+        n = obs.shape[0]
+        if self._last_time.shape[0] != n:
+            self._last_time = np.full(n, -np.inf)
+            self._restart = np.ones(n, dtype=bool)
+        times = obs[:, OBSERVATION_FIELDS["time"].start].astype(float)
+        starts = self._restart | (times < self._last_time)  # time going back: a reset (NaN compares false)
+        if episode_start is not None:
+            starts |= np.broadcast_to(np.asarray(episode_start, dtype=bool).reshape(-1), (n,))
+        finite = np.all(np.isfinite(obs), axis=1)
+        self._restart = ~finite  # a row that broke begins afresh at its next finite observation
+        np.copyto(self._last_time, times, where=np.isfinite(times))
+        clean = np.where(finite[:, None], obs, 0.0).astype(np.float32)
+        return self.history(clean, starts)
 
 
 class VecObservationHistory(VecEnvWrapper):

@@ -68,13 +68,11 @@ class TrainedPolicy:
         self.failure_log: list[str] = []
         self.history: Any = None
         if info.get("history"):
-            from agents.history import HistorySettings, ObservationHistory
+            from agents.history import FlightMemory, HistorySettings
 
             settings = HistorySettings.from_spec(info["history"])
             width = settings.observation_size(int(self.observation_space.shape[0]))
-            self.history = ObservationHistory(settings, width)
-            self._last_time = np.zeros(0)
-            self._restart = np.zeros(0, dtype=bool)
+            self.history = FlightMemory(settings, width)
 
     @property
     def observation_size(self) -> int:
@@ -82,24 +80,6 @@ class TrainedPolicy:
         if self.history is not None:
             return self.history.observation_size
         return int(self.observation_space.shape[0])
-
-    def _remember(self, obs: np.ndarray, episode_start: Any) -> np.ndarray:
-        """The network's inputs for env observations ``(n, 48)``, through the per-row history."""
-        from wall_env.observation import OBSERVATION_FIELDS
-
-        n = obs.shape[0]
-        if self._last_time.shape[0] != n:
-            self._last_time = np.full(n, -np.inf)
-            self._restart = np.ones(n, dtype=bool)
-        times = obs[:, OBSERVATION_FIELDS["time"].start].astype(float)
-        starts = self._restart | (times < self._last_time)  # time going back: a reset (NaN compares false)
-        if episode_start is not None:
-            starts |= np.broadcast_to(np.asarray(episode_start, dtype=bool).reshape(-1), (n,))
-        finite = np.all(np.isfinite(obs), axis=1)
-        self._restart = ~finite  # a row that broke begins afresh at its next finite observation
-        np.copyto(self._last_time, times, where=np.isfinite(times))
-        clean = np.where(finite[:, None], obs, 0.0).astype(np.float32)
-        return self.history(clean, starts)
 
     def normalize(self, observation: np.ndarray) -> np.ndarray:
         """The observation as the network sees it (float32, normalised and clipped)."""
@@ -119,7 +99,7 @@ class TrainedPolicy:
         if obs.shape[-1:] != (expected,) or obs.ndim > 2:
             raise ValueError(f"observation must have shape ({expected},) or (n, {expected}), got {obs.shape}")
         bad = ~np.all(np.isfinite(obs), axis=-1)
-        inputs = obs if self.history is None else self._remember(obs.reshape(-1, expected), episode_start).reshape(
+        inputs = obs if self.history is None else self.history(obs.reshape(-1, expected), episode_start).reshape(
             *obs.shape[:-1], -1)
         if not np.any(bad):
             actions, state = self.model.predict(self.normalize(inputs), state=state, episode_start=episode_start,

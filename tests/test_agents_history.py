@@ -93,4 +93,5 @@ def test_an_agent_trained_with_a_history_loads_flies_and_exports_with_it(tmp_pat
     from agents.export import OnnxPolicy, export_onnx
 
     onnx = OnnxPolicy(export_onnx(out, tmp_path / "policy.onnx"))
-    assert onnx.observation_size == 3 * 48 + 3 and '"frames": 3' in onnx.metadata["history"]
+    assert onnx.input_size == 3 * 48 + 3 and '"frames": 3' in onnx.metadata["history"]
+    assert onnx.observation_size == 48  # it takes the env's observations and keeps the history, as the policy does

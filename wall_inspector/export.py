@@ -99,8 +99,12 @@ def _export_ppo(args: argparse.Namespace, out: Path) -> int:
         raise SystemExit(str(exc)) from None
     policy = OnnxPolicy(path)
     print(f"wrote {path}: the PPO agent of {source} ({policy.metadata.get('env_id')}), normalisation folded in; "
-          f"observation ({policy.observation_size} floats) in, action (4 floats in [-1, 1]) out; its actions match "
+          f"network input ({policy.input_size} floats) in, action (4 floats in [-1, 1]) out; its actions match "
           f"the Python agent's within {TOLERANCE:g}")
+    if policy.memory is not None:
+        print(f"the agent remembers: its input is the history of the env's {policy.observation_size}-float observations "
+              f"({policy.metadata.get('history')}), which the vehicle keeps as agents.history.ObservationHistory does "
+              "(OnnxPolicy.predict keeps it from the observations)")
     return 0
 
 
