@@ -342,6 +342,11 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
     if metrics:
         lines += ["| metric | value |", "| --- | --- |"]
         lines += [f"| {name} | {_fmt(value)} |" for name, value in metrics.items()]
+    development = card.get("development") or {}
+    if development.get("runs"):
+        lines += ["", "## Development runs", "", development.get("note", ""), "",
+                  "| run | env steps | wall time (s) |", "| --- | ---: | ---: |"]
+        lines += [f"| {r.get('what')} | {int(r['env_steps']):,} | {_fmt(r.get('wall_time_s'))} |" for r in development["runs"]]
     robustness = card.get("robustness")
     if robustness:
         lines += ["", "## Robustness", "", robustness.get("text", "")]

@@ -187,3 +187,18 @@ def test_fly_loads_agents_through_load_policy_with_their_statistics(tmp_path):
     with pytest.raises(TaskMismatchError):
         make_policy(str(pretrained_path(SWEEP)), env)
     env.close()
+
+
+def test_the_budget_counts_the_development_runs_a_model_card_records():
+    import json
+
+    from agents import pretrained_path
+    from wall_inspector.compare import budget_markdown, budgets
+
+    card = json.loads((pretrained_path("WallSweep") / "model_card.json").read_text())
+    runs = card["development"]["runs"]
+    rows = [r for r in budgets("tuned", ["WallSweep"], with_ppo=True) if r["method"] == "PPO"]
+    assert [r["settings"] for r in rows] == ["shipped agent", f"{len(runs)} development runs (not shipped)"]
+    assert rows[1]["env_steps"] == sum(r["env_steps"] for r in runs)
+    assert rows[1]["wall_time_s"] == sum(r["wall_time_s"] for r in runs)
+    assert "development runs (not shipped)" in budget_markdown(rows)

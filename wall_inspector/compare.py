@@ -280,6 +280,11 @@ def budgets(preset: str, tasks: list[str], with_ppo: bool) -> list[dict[str, Any
                 rows.append({"task": task, "method": "PPO", "settings": settings, "trials": None,
                              "env_steps": training_env_steps(training),
                              "wall_time_s": training["total_wall_time_s"]})
+                runs = (json.loads(card_path.read_text()).get("development") or {}).get("runs") or []
+                if runs:  # the runs that chose the shipped configuration count too
+                    rows.append({"task": task, "method": "PPO", "settings": f"{len(runs)} development runs (not shipped)",
+                                 "trials": None, "env_steps": sum(int(r["env_steps"]) for r in runs),
+                                 "wall_time_s": sum(float(r["wall_time_s"]) for r in runs)})
     return rows
 
 
