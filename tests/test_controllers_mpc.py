@@ -431,6 +431,7 @@ def test_from_env_reads_only_the_public_description(sweep_env):
     (lambda env: MPC.from_env(env, solver=4), "solver"),
     (lambda env: MPC.from_env(env, max_tilt_deg=90.0), "max_tilt_deg"),
     (lambda env: MPC.from_env(env, model="drag"), "model"),
+    (lambda env: MPC(MPC._description(env), solver={"max_iterations": 1}), r"solver must be LMSettings .*got dict"),
 ])
 def test_bad_mpc_arguments_name_the_argument(sweep_env, build, name):
     with pytest.raises(ValueError, match=name):

@@ -108,8 +108,10 @@ class MPC(ControllerPolicy):
     vehicle: the vehicle of the prediction model (mass, rotor layout); default the env's.
     horizon, dt: N steps of dt seconds (paper: 20, 0.01 s).
     weights, limits: :class:`MPCWeights`, :class:`InputLimits` (defaults: the authors' release).
-    solver: :class:`LMSettings` (iteration limits, tolerances), or a mapping of its fields
-        (``{"max_iterations": 1}``: one iteration per control step, real-time-iteration style).
+    solver: :class:`LMSettings` (iteration limits, tolerances), e.g. ``LMSettings(max_iterations=1)``:
+        one iteration per control step, real-time-iteration style. The constructor takes the
+        settings object only; :meth:`from_env`, which configuration files feed, also takes a
+        mapping of its fields and builds the object from it.
     max_tilt_deg: tilt limit of the flatness attitude reference.
     model_attitude: attitude reference from flatness with the model's force (default;
         see :mod:`controllers.mpc.reference`), or from kinematics alone.
@@ -127,9 +129,12 @@ class MPC(ControllerPolicy):
     def __init__(self, description: EnvDescription, model: AeroModel | None = None, *,
                  vehicle: VehicleParams | None = None, horizon: int = 20, dt: float = 0.01,
                  weights: MPCWeights | None = None, limits: InputLimits | None = None,
-                 solver: LMSettings | dict[str, Any] | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True,
+                 solver: LMSettings | None = None, max_tilt_deg: float = 80.0, model_attitude: bool = True,
                  force_at_prediction: bool = True, attitude_model: AeroModel | None = None, threads: int = 1):
         super().__init__(description)
+        if solver is not None and not isinstance(solver, LMSettings):
+            raise ValueError(f"solver must be LMSettings (controllers.mpc.LMSettings), got {type(solver).__name__}; "
+                             "from_env also takes a mapping of its fields")
         if model is not None and not isinstance(model, AeroModel):
             raise ValueError(f"model must be a wall_env.AeroModel, got {type(model).__name__}")
         if vehicle is not None and not isinstance(vehicle, VehicleParams):
@@ -178,7 +183,7 @@ class MPC(ControllerPolicy):
         ``None`` for the constructor's defaults (the authors' release). Keywords override it.
         """
         description = cls._description(env)
-        policy = cls(description, **{**_preset_kwargs(preset, "mpc", description), **kwargs})
+        policy = cls(description, **_settings_objects({**_preset_kwargs(preset, "mpc", description), **kwargs}))
         policy.follow(env)
         return policy
 
@@ -430,7 +435,7 @@ class SCMPC(MPC):
         :meth:`MPC.from_env` (weights, horizon and compensation); keywords override it.
         """
         description = cls._description(env)
-        kwargs = {**_preset_kwargs(preset, "scmpc", description), **kwargs}
+        kwargs = _settings_objects({**_preset_kwargs(preset, "scmpc", description), **kwargs})
         if model is not None:
             if k_s is not None or d_thr is not None:
                 raise ValueError("give the suction either as k_s/d_thr or as a model file, not both")
@@ -443,6 +448,13 @@ class SCMPC(MPC):
             policy = cls(description, description.nominal_model.with_effect(suction), **kwargs)
         policy.follow(env)
         return policy
+
+
+def _settings_objects(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``kwargs`` with a ``solver`` mapping (from a configuration file) built into its :class:`LMSettings`."""
+    if kwargs.get("solver") is not None:
+        kwargs = {**kwargs, "solver": LMSettings.coerce(kwargs["solver"])}
+    return kwargs
 
 
 def _preset_kwargs(preset: str | Path | None, method: str, description: EnvDescription) -> dict[str, Any]:
