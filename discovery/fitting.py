@@ -119,12 +119,19 @@ class EffectTerm:
         self._affine_base: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self._check_affine()
 
+    def _sample_mask(self, s: int) -> np.ndarray | None:
+        """Which samples of segment ``s`` the effect acts on (``None``: all of them)."""
+        return None
+
     def _evaluate(self, s: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         seg = self.data.segments[s]
         rows = seg.fit_rows
         if not self._active[s]:
             return np.zeros((len(rows), 3)), np.zeros((len(rows), 3, self.size))
         f, j = self._evaluators[s].force_and_jacobian(seg.states, theta)
+        mask = self._sample_mask(s)
+        if mask is not None:
+            f, j = f * mask[:, None], j * mask[:, None, None]
         return seg.smooth_force(f, rows), seg.smooth_force(j, rows)
 
     def _check_affine(self) -> None:

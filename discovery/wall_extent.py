@@ -85,14 +85,8 @@ class BoundedWallTerm(EffectTerm):
         self._masks = [(c <= o["edge_m"]) if o["side"] == "below" else (c >= o["edge_m"]) for c in coordinates]
         super().__init__(data, plain_wall(effect))
 
-    def _evaluate(self, s: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        seg = self.data.segments[s]
-        rows = seg.fit_rows
-        if not self._active[s]:
-            return np.zeros((len(rows), 3)), np.zeros((len(rows), 3, self.size))
-        f, j = self._evaluators[s].force_and_jacobian(seg.states, theta)
-        mask = self._masks[s]
-        return seg.smooth_force(f * mask[:, None], rows), seg.smooth_force(j * mask[:, None, None], rows)
+    def _sample_mask(self, s: int) -> np.ndarray | None:
+        return self._masks[s]
 
     def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
         seg = self.data.segments[segment]
