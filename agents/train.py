@@ -49,6 +49,7 @@ from agents.config import (
     base_controller_kwargs,
     save_config,
 )
+from wall_env import interrupts
 
 __all__ = [
     "TrainingInterrupted",
@@ -341,7 +342,9 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                 with _unchecked_distributions():
                     model.learn(total_timesteps=target_steps - start_steps, callback=CallbackList(callbacks),
                                 reset_num_timesteps=not resume, tb_log_name="ppo", progress_bar=False)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, Exception) as exc:
+            if not interrupts.is_interrupt(exc):  # a real error; one raised after Ctrl-C is the interrupt's
+                raise
             saved = periodic.save()  # model, statistics, step count and wall time: all --resume needs
             raise TrainingInterrupted(out, saved, int(model.num_timesteps)) from None
         ppo_time = time.perf_counter() - ppo_started

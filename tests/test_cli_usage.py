@@ -112,6 +112,35 @@ def test_ctrl_c_in_any_command_ends_without_a_traceback(monkeypatch, capsys):
     assert capsys.readouterr().err == "wall-inspector demo: interrupted\n"
 
 
+def test_ctrl_c_that_native_code_reports_as_another_error_is_still_an_interrupt(monkeypatch, capsys):
+    """CasADi's SWIG layer, interrupted while it converts an argument, raises NotImplementedError ("Wrong
+    number or type of arguments") instead of the KeyboardInterrupt; after a Ctrl-C that error is the interrupt's,
+    and without one an error is an error."""
+    import signal
+
+    import wall_inspector.demo
+
+    def interrupted_in_native_code(args):
+        signal.raise_signal(signal.SIGINT)  # the command line's handler: the flag, then KeyboardInterrupt ...
+
+    def swallowing(args):
+        try:
+            interrupted_in_native_code(args)
+        except KeyboardInterrupt:  # ... which the native layer turns into an error of its own
+            raise NotImplementedError("Wrong number or type of arguments for function 'new_DM'.") from None
+
+    monkeypatch.setattr(wall_inspector.demo, "run", swallowing)
+    assert main(["demo"]) == 130
+    assert capsys.readouterr().err == "wall-inspector demo: interrupted\n"
+
+    def broken(args):
+        raise NotImplementedError("a real error")
+
+    monkeypatch.setattr(wall_inspector.demo, "run", broken)
+    with pytest.raises(NotImplementedError, match="a real error"):  # no Ctrl-C this time: not hidden
+        main(["demo"])
+
+
 # what a command needs besides the bad flag, so that the flag is the only thing wrong
 REQUIRED = {
     "import-log": ["flight.ulg", "--vehicle", "vehicle.yaml", "--scene", "scene.yaml"],

@@ -119,9 +119,13 @@ def main(argv: list[str] | None = None) -> int:
         if exit_.code == USAGE_ERROR:  # the parser's, already printed as one line
             return USAGE_ERROR
         raise
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, Exception) as exc:
+        if not interrupts.is_interrupt(exc):  # a real error; one raised after Ctrl-C is the interrupt's
+            raise
         print(f"{prog}: interrupted", file=sys.stderr)
         return INTERRUPTED
+    finally:
+        interrupts.requested.clear()
 
 
 if __name__ == "__main__":

@@ -189,7 +189,11 @@ def _tune(args: argparse.Namespace, tuner: Any, out: Path, env_id: str, method: 
 
             with ray_backend.session(args.ray, args.ray_cpus):
                 result = tune_on_ray.run(tuner, cpus_per_trial=args.cpus_per_trial, progress=not args.no_progress)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, Exception) as exc:
+        from wall_env import interrupts
+
+        if not interrupts.is_interrupt(exc):  # a real error; one raised after Ctrl-C is the interrupt's
+            raise
         print(f"\ninterrupted: the study is stored in {out / 'study.db'}; run the same command again to resume",
               file=sys.stderr)
         return 130
