@@ -167,8 +167,6 @@ class FlightMemory:
 
     def __call__(self, observations: np.ndarray, episode_start: Any = None) -> np.ndarray:
         """The network's inputs ``(n, size)`` for env observations ``(n, observation_size)``."""
-        from wall_env.observation import OBSERVATION_FIELDS
-
         obs = np.asarray(observations, dtype=np.float32)
         n = obs.shape[0]
         if self._last_time.shape[0] != n:
