@@ -183,6 +183,16 @@ class NormalizeSettings:
             _number(f"normalize.{key}", getattr(self, key), 0.0, low_open=True)
 
 
+def _check_supervised(section: str, settings: Any, counts: tuple[str, ...]) -> None:
+    """The fields a controller's flights fitted by supervised learning share (a warm start, a teacher): the flight
+    counts ``counts``, the fit's epochs and batch size, the action noise, the learning rate and the seed."""
+    for key in (*counts, "epochs", "batch_size"):
+        _positive_int(f"{section}.{key}", getattr(settings, key))
+    _number(f"{section}.noise", settings.noise, 0.0, 1.0)
+    _number(f"{section}.learning_rate", settings.learning_rate, 0.0, low_open=True)
+    _whole(f"{section}.seed", settings.seed)
+
+
 @dataclass
 class WarmStartSettings:
     """A warm start (``warm_start:``, :mod:`agents.behaviour_cloning`): before PPO, a controller (None, "pid" or
@@ -204,11 +214,7 @@ class WarmStartSettings:
 
     def __post_init__(self) -> None:
         _choice("warm_start.controller", self.controller, _RESIDUAL_BASES)
-        for key in ("demo_envs", "demo_steps", "epochs", "batch_size"):
-            _positive_int(f"warm_start.{key}", getattr(self, key))
-        _number("warm_start.noise", self.noise, 0.0, 1.0)
-        _number("warm_start.learning_rate", self.learning_rate, 0.0, low_open=True)
-        _whole("warm_start.seed", self.seed)
+        _check_supervised("warm_start", self, ("demo_envs", "demo_steps"))
 
 
 @dataclass
@@ -233,11 +239,7 @@ class TeacherSettings:
     def __post_init__(self) -> None:
         if not isinstance(self.controller, str) or self.controller not in ("pid", "scmpc"):
             raise ValueError(f"teacher.controller must be 'pid' or 'scmpc', got {self.controller!r}")
-        for key in ("envs", "steps", "iterations", "epochs", "batch_size"):
-            _positive_int(f"teacher.{key}", getattr(self, key))
-        _number("teacher.noise", self.noise, 0.0, 1.0)
-        _number("teacher.learning_rate", self.learning_rate, 0.0, low_open=True)
-        _whole("teacher.seed", self.seed)
+        _check_supervised("teacher", self, ("envs", "steps", "iterations"))
 
 
 @dataclass
