@@ -271,7 +271,8 @@ def budgets(preset: str, tasks: list[str], with_ppo: bool) -> list[dict[str, Any
 
             card_path = pretrained_path(task) / "model_card.json"
             if card_path.is_file():
-                training = json.loads(card_path.read_text())["training"]
+                card = json.loads(card_path.read_text())
+                training = card["training"]
                 # a warm start's demonstrations count as env steps of the training (training_env_steps); its
                 # controller's own tuning is that controller's row
                 warm = training.get("warm_start") or {}
@@ -280,7 +281,7 @@ def budgets(preset: str, tasks: list[str], with_ppo: bool) -> list[dict[str, Any
                 rows.append({"task": task, "method": "PPO", "settings": settings, "trials": None,
                              "env_steps": training_env_steps(training),
                              "wall_time_s": training["total_wall_time_s"]})
-                runs = (json.loads(card_path.read_text()).get("development") or {}).get("runs") or []
+                runs = (card.get("development") or {}).get("runs") or []
                 if runs:  # the runs that chose the shipped configuration count too
                     rows.append({"task": task, "method": "PPO", "settings": f"{len(runs)} development runs (not shipped)",
                                  "trials": None, "env_steps": sum(int(r["env_steps"]) for r in runs),
