@@ -99,7 +99,7 @@ def _flag(name: str, value: Any) -> bool:
 
 
 def _choice(name: str, value: Any, allowed: tuple) -> Any:
-    if not any(value is a or (a is not None and value == a and type(value) is type(a)) for a in allowed):
+    if value not in allowed:
         raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
     return value
 
