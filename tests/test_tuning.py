@@ -9,7 +9,7 @@ import pytest
 
 from controllers.presets import load_preset
 from controllers.tuning import flight_cost
-from controllers.tuning.objective import TrackingObjective
+from controllers.tuning.objective import TrackingObjective, condition_flight_cost
 from controllers.tuning.space import PID_RANGES, SearchSpace
 from wall_inspector.cli import main
 from wall_inspector.tune import parse_seeds, recorded_command
@@ -73,6 +73,9 @@ def test_an_interrupted_study_resumes_to_the_same_budget(tmp_path, monkeypatch, 
     (["--method", "pid", "--set", "k_s=-1"], "k_s"),
     (["--method", "pid", "--horizon-steps", "10,20"], "apply to the MPCs"),
     (["--method", "pid", "--seeds", "x"], "--seeds must be seeds"),
+    (["--method", "pid", "--conditions", "windy"], "--conditions takes flight-condition profiles"),
+    (["--method", "pid", "--conditions", "realistic", "--set", "conditions=realistic"], "not both"),
+    (["--objective", "paper-table-i", "--conditions", "realistic"], "applies to the tracking objective"),
     ([], "--method is required"),
 ])
 def test_bad_tune_arguments_are_one_line_and_exit_2(tmp_path, capsys, args, message):
@@ -99,3 +102,48 @@ def test_the_flight_cost_prices_contacts_and_effort():
     # 0.3 cm RMS along the wall (a 3-4-5 triangle with the 0.4 cm wall-normal error) at a fifth
     assert flight_cost(metrics) == pytest.approx(0.4 + 0.2 * 0.3 + 0.05 * 20 + 1.0 * 0.1 + 0.2 * 0.5)
     assert flight_cost({**metrics, "wall_normal_rmse": float("nan")}) == pytest.approx(0.5 + 1.0 + 0.1 + 0.1)
+
+
+def test_the_cost_of_a_flight_under_conditions_is_its_wall_distance_and_contacts():
+    metrics = {"wall_normal_rmse": 0.004, "rmse_norm": 0.005, "collisions": 20, "body_rate_effort_rms": 0.1,
+               "thrust_effort_rms": 0.5}
+    assert condition_flight_cost(metrics) == pytest.approx(0.4 + 0.05 * 20)
+    assert condition_flight_cost({**metrics, "wall_normal_rmse": float("nan")}) == pytest.approx(0.5 + 1.0)
+
+
+def test_tuning_under_conditions_flies_every_seed_in_each_world_and_prices_them_so(tmp_path):
+    from controllers.evaluation import evaluate
+    from controllers.tuning.study import build_policy
+
+    kwargs = {"noise": True, "terminate_on_collision": False, "duration": 0.5, "standoff": 0.3}
+    objective = TrackingObjective("WallInspector/WallHover-v0", "pid", [1, 2], kwargs, build_policy,
+                                  conditions=["realistic"])
+    settings = load_preset("paper").methods["pid"]
+    flights = objective.evaluate(settings)
+    rows = flights.details["flights"]
+    assert [(f["conditions"], f["seed"]) for f in rows] == [("task", 1), ("task", 2), ("realistic", 1), ("realistic", 2)]
+    # each flight is the flight the env gives under those conditions, priced by its world's cost
+    realistic = evaluate(lambda env: build_policy("pid", settings, env), objective.env_id, [2],
+                         {**kwargs, "conditions": "realistic"}).metrics()
+    ideal = evaluate(lambda env: build_policy("pid", settings, env), objective.env_id, [2], kwargs).metrics()
+    assert realistic["rmse"] != ideal["rmse"]  # the conditions reached the flight
+    assert rows[3]["cost_cm"] == pytest.approx(condition_flight_cost(realistic))
+    assert rows[1]["cost_cm"] == pytest.approx(flight_cost(ideal))
+    assert flights.value == pytest.approx(sum(f["cost_cm"] for f in rows) / 4)
+    assert objective.flights_per_trial() == 4
+    with pytest.raises(ValueError, match="conditions must name profiles"):
+        TrackingObjective("WallInspector/WallHover-v0", "pid", [1], kwargs, build_policy, conditions=["ideal"])
+
+
+def test_a_study_started_from_a_tuned_preset_counts_that_presets_budget(tmp_path):
+    first = tmp_path / "first"
+    assert main(["tune", "--method", "pid", "--budget-trials", "2", "--out", str(first), *TINY]) == 0
+    second = tmp_path / "second"
+    assert main(["tune", "--method", "pid", "--budget-trials", "2", "--conditions", "realistic",
+                 "--start", str(first / "preset.yaml"), "--out", str(second), *TINY]) == 0
+    one, two = load_preset(first / "preset.yaml").provenance, load_preset(second / "preset.yaml").provenance
+    assert two["objective"]["conditions"] == ["realistic"] and "'realistic'" in two["objective"]["definition"]
+    assert two["used"]["trials"] == 2 and two["used"]["env_steps"] == 2 * 2 * 50  # two worlds a seed
+    assert two["used_with_start"]["trials"] == 4
+    assert two["used_with_start"]["env_steps"] == one["used"]["env_steps"] + two["used"]["env_steps"]
+    assert [start["preset"] for start in two["start"]] == ["paper", "tuned-WallHover-v0-pid"]

@@ -255,13 +255,14 @@ def budgets(preset: str, tasks: list[str], with_ppo: bool) -> list[dict[str, Any
     """Each method's optimisation budget per task: the tuning study of its preset, PPO's training."""
     from controllers import paper_tables as pt
     from controllers.presets import METHOD_LABELS, load_preset
+    from controllers.tuning.study import spent_budget
 
     rows = []
     for task in tasks:
         for method, label in METHOD_LABELS.items():
             chosen = pt._preset_for(preset, method, task)
             loaded = load_preset(chosen, method=method, task=task)
-            used = loaded.provenance.get("used") or {}
+            used = spent_budget(loaded)  # a study that started from a tuned preset counts that preset's study too
             rows.append({"task": task, "method": label, "settings": loaded.name,
                          "trials": used.get("trials"), "env_steps": used.get("env_steps"),
                          "wall_time_s": used.get("wall_time_s")})

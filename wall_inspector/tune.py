@@ -5,6 +5,7 @@ Examples::
     wall-inspector tune --env WallSweep-v0 --method scmpc                  # default budget: 50 trials, <= 20 min
     wall-inspector tune --env WallSweep-v0 --method pid --budget-trials 20 --out runs/tune-pid
     wall-inspector tune --objective paper-table-i --set standoff=0.15       # the paper-sim preset
+    wall-inspector tune --env WallSweep-v0 --method scmpc --conditions realistic   # ideal and realistic flights
 
 The study (Optuna, seeded TPE, :mod:`controllers.tuning`) is stored in
 ``OUT/study.db``; Ctrl-C stops it and the same command resumes it. When the budget is
@@ -50,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fixed-dt", action="store_true", help="keep the MPC step dt = 0.01 s (default: tune it)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="environment keyword, e.g. k_s=10 or standoff=0.14 (repeatable)")
+    parser.add_argument("--conditions", default="", metavar="PROFILE[,PROFILE]",
+                        help="also fly every seed under these flight-condition profiles (e.g. realistic: sensing "
+                             "error, latency, motor lag, turbulence) and average the cost over all flights")
     parser.add_argument("--sampler-seed", type=int, default=0, help="seed of the TPE sampler (default 0)")
     parser.add_argument("--start", action="append", default=[], metavar="PRESET",
                         help="also fly this preset's settings first (a name or file; repeatable); the authors' "
@@ -106,6 +110,24 @@ def _env_kwargs(items: list[str]) -> dict:
     return out
 
 
+def _conditions(text: str, objective: str, env_kwargs: dict) -> list[str]:
+    """``--conditions``: profile names, checked against :data:`wall_env.conditions.PROFILES`."""
+    from wall_env.conditions import PROFILES
+
+    names = [c.strip() for c in text.split(",") if c.strip()]
+    allowed = sorted(set(PROFILES) - {"ideal"})
+    for name in names:
+        if name not in allowed:
+            raise ValueError(f"--conditions takes flight-condition profiles of {allowed}, got {name!r}")
+    if names and objective != "tracking":
+        raise ValueError("--conditions applies to the tracking objective")
+    if names and "conditions" in env_kwargs:
+        raise ValueError("give the flight conditions either as --set conditions=... (every flight) or as "
+                         "--conditions (flown besides the task's world), not both")
+    if len(set(names)) != len(names):
+        raise ValueError(f"--conditions names a profile twice: {text!r}")
+    return names
+
 
 def run(args: argparse.Namespace) -> int:
     import gymnasium as gym
@@ -140,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
         if method == "pid" and (steps or args.fixed_dt):
             raise ValueError("--horizon-steps and --fixed-dt apply to the MPCs, not to pid")
         env_kwargs = _env_kwargs(args.set)
+        conditions = _conditions(args.conditions, args.objective, env_kwargs)
         probe = gym.make(env_id, **env_kwargs)  # the env's own checks name a bad keyword and its range
         probe.close()
         space_method = "mpc" if method == "mpc+scmpc" else method
@@ -159,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
 
     command = recorded_command(sys.argv[2:]) if len(sys.argv) > 1 and sys.argv[1] == "tune" \
         else f"wall-inspector tune --env {env_id} --method {method}"
-    objective = default_objective(args.objective, env_id, method, train, env_kwargs)
+    objective = default_objective(args.objective, env_id, method, train, env_kwargs, conditions=conditions)
     tuner = Tuner(objective, heldout, out, budget_trials=args.budget_trials,
                   budget_minutes=args.budget_minutes or None, seed=args.sampler_seed, space=space, command=command,
                   progress=not args.no_progress, start=args.start)

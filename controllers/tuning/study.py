@@ -42,7 +42,7 @@ from controllers.tuning.objective import (
 from controllers.tuning.space import SearchSpace
 from wall_env.provenance import git_commit
 
-__all__ = ["Tuner", "TuningResult", "build_policy"]
+__all__ = ["Tuner", "TuningResult", "build_policy", "spent_budget"]
 
 _STUDY_NAME = "tune"
 
@@ -151,6 +151,8 @@ class Tuner:
                                     direction="minimize", load_if_exists=True)
         signature = {"method": self.method, "objective": self.objective.name, "env_id": self.objective.env_id,
                      "train_seeds": [int(s) for s in self.objective.seeds]}
+        if self.objective.conditions:
+            signature["conditions"] = list(self.objective.conditions)
         recorded = study.user_attrs.get("signature")
         if recorded is None:
             study.set_user_attr("signature", signature)
@@ -221,8 +223,8 @@ class Tuner:
         steps = flights.env_steps
         trial.set_user_attr("env_steps", steps)
         trial.set_user_attr("details", _jsonable(flights.details))
-        if len(flights.details.get("flights", ())) < len(self.objective.seeds) and \
-                isinstance(self.objective, TrackingObjective):
+        if isinstance(self.objective, TrackingObjective) and \
+                len(flights.details.get("flights", ())) < self.objective.flights_per_trial():
             study.tell(trial, state=optuna.trial.TrialState.PRUNED)
         else:
             study.tell(trial, flights.value)
@@ -243,12 +245,15 @@ class Tuner:
             "env_kwargs": self.objective.env_kwargs,
             "method": self.method,
             "objective": {"name": self.objective.name, "definition": self._objective_definition(),
+                          **({"conditions": list(self.objective.conditions)} if self.objective.conditions else {}),
                           "train_value": best.value, "heldout_value": heldout.value,
                           "authors_settings_heldout_value": baseline.value},
             "train_seeds": [int(s) for s in self.objective.seeds],
             "heldout_seeds": self.heldout_seeds,
             "budget": {"trials": self.budget_trials, "minutes": self.budget_minutes},
             "used": {"trials": trials, "env_steps": env_steps, "wall_time_s": round(wall_time, 1)},
+            "used_with_start": _with_start({"trials": trials, "env_steps": env_steps, "wall_time_s": wall_time},
+                                           self.start),
             "sampler": f"optuna TPESampler(seed={self.seed}), MedianPruner(n_startup_trials=8)",
             "start": [{"preset": p.name, "settings": p.methods[self.space.method]} for p in [self.base, *self.start]],
             "command": self.command,
@@ -274,14 +279,38 @@ class Tuner:
         if self.objective.name == "paper-table-i":
             return ("over Table I's MPC (k_s 1, 4, 10 N/m) and SC-MPC (k_s 10 N/m) cells: max |ln(wall-normal RMSE "
                     "/ paper RMSE)| + 0.1 mean ln(wall-normal RMSE / paper RMSE)^2")
-        return (f"mean over flights of wall-normal RMSE (cm) + {ALONG_WALL_PRICE} x RMSE along the wall (cm) + "
+        conditions = self.objective.conditions
+        task = (f"wall-normal RMSE (cm) + {ALONG_WALL_PRICE} x RMSE along the wall (cm) + "
                 f"{CONTACT_PRICE_CM} cm per contact step + "
                 f"{RATE_EFFORT_PRICE_CM} cm per rad/s RMS body-rate command + {THRUST_EFFORT_PRICE_CM} cm per N "
                 "RMS thrust command away from hover")
+        if not conditions:
+            return f"mean over flights of {task}"
+        return (f"mean over flights, every seed flown in the task's world and under the flight conditions "
+                f"{', '.join(repr(c) for c in conditions)}; a flight in the task's world costs {task}; one under "
+                f"the conditions its wall-normal RMSE (cm) + {CONTACT_PRICE_CM} cm per contact step")
 
     def _comment(self, heldout: FlightSet, baseline: FlightSet) -> str:
         return (f"Made by `wall-inspector tune` ({self.objective.name} objective; see the provenance below).\n"
                 f"Held-out seeds: objective {heldout.value:.4g} (the authors' settings: {baseline.value:.4g}).")
+
+
+def spent_budget(preset: ControllerPreset) -> dict[str, Any]:
+    """What making ``preset`` cost: its study's trials, env steps and wall time together with those of the tuned
+    presets it started from (``used_with_start``; ``used`` for a preset that records only its own study)."""
+    return dict(preset.provenance.get("used_with_start") or preset.provenance.get("used") or {})
+
+
+def _with_start(used: dict[str, Any], start: Sequence[ControllerPreset]) -> dict[str, Any]:
+    """``used`` plus the budget of every start preset that was itself tuned: a study that starts from a tuned
+    preset builds on that preset's study, so a method's budget counts both."""
+    total = {k: (0 if v is None else v) for k, v in used.items()}
+    for preset in start:
+        for key, value in spent_budget(preset).items():
+            if key in total and value is not None:
+                total[key] += value
+    total["wall_time_s"] = round(float(total["wall_time_s"]), 1)
+    return total
 
 
 def _jsonable(value: Any) -> Any:
@@ -297,10 +326,15 @@ def _jsonable(value: Any) -> Any:
 
 
 def default_objective(objective: str, env_id: str, method: str, seeds: Sequence[int], env_kwargs: dict[str, Any],
-                      build: Callable[..., Any] = build_policy) -> TrackingObjective | PaperTableIObjective:
-    """The objective named ``objective`` (``"tracking"`` or ``"paper-table-i"``)."""
+                      build: Callable[..., Any] = build_policy,
+                      conditions: Sequence[str] = ()) -> TrackingObjective | PaperTableIObjective:
+    """The objective named ``objective`` (``"tracking"`` or ``"paper-table-i"``); ``conditions``: flight-condition
+    profiles the tracking objective flies every seed in too."""
     if objective == "paper-table-i":
+        if conditions:
+            raise ValueError("the paper-table-i objective flies the paper's ideal conditions; conditions apply to "
+                             "the tracking objective")
         return PaperTableIObjective(seeds, env_kwargs, build)
     if objective != "tracking":
         raise ValueError(f"objective must be 'tracking' or 'paper-table-i', got {objective!r}")
-    return TrackingObjective(env_id, method, seeds, env_kwargs, build)
+    return TrackingObjective(env_id, method, seeds, env_kwargs, build, conditions=conditions)
