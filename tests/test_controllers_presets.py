@@ -219,8 +219,9 @@ STIFFNESS_BANDS = {
     ("tuned", "WallCircle", "mpc"): ((69.3, 104.0), (0.41, 0.61)),  # measured 86.68 N/m per kg, damping 0.507
     ("tuned", "WallCircle", "scmpc"): ((35.9, 53.8), (0.54, 0.73)),  # measured 44.82 N/m per kg, damping 0.635
     ("tuned", "WallSweep", "pid"): ((56.9, 85.3), (0.19, 0.39)),  # measured 71.1 N/m per kg, damping 0.29
-    ("tuned", "WallSweep", "mpc"): ((62.1, 93.1), (0.39, 0.59)),  # measured 77.62 N/m per kg, damping 0.491
-    ("tuned", "WallSweep", "scmpc"): ((42.6, 64.0), (0.5, 0.7)),  # measured 53.3 N/m per kg, damping 0.6
+    # the sweep's MPC and SC-MPC tuned under the realistic conditions too (their presets' provenance)
+    ("tuned", "WallSweep", "mpc"): ((53.6, 80.4), (0.41, 0.61)),  # measured 67.02 N/m per kg, damping 0.51
+    ("tuned", "WallSweep", "scmpc"): ((45.7, 68.6), (0.37, 0.57)),  # measured 57.15 N/m per kg, damping 0.472
     ("tuned", "Corridor", "pid"): ((57.9, 86.9), (0.22, 0.42)),  # measured 72.41 N/m per kg, damping 0.316
     ("tuned", "Corridor", "mpc"): ((52.6, 79.0), (0.41, 0.61)),  # measured 65.81 N/m per kg, damping 0.507
     ("tuned", "Corridor", "scmpc"): ((31.1, 46.6), (0.49, 0.69)),  # measured 38.85 N/m per kg, damping 0.59
