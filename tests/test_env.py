@@ -189,6 +189,36 @@ def test_domain_randomisation_changes_the_suction_every_episode():
     env.close()
 
 
+def test_a_drawn_start_time_starts_the_episode_that_far_along_the_reference():
+    """randomize={"start_time": ...}: the episode starts at the reference's position and velocity of that time,
+    the time observation starts there, and the episode ends at the task's duration as from the start."""
+    env = gym.make("WallInspector/WallSweep-v0", randomize={"start_time": (6.0, 9.0)}, **QUIET)
+    dt = env.unwrapped.config.control_dt
+    starts = set()
+    for seed in range(3):
+        obs, info = env.reset(seed=seed, options={"perturb_start": False})
+        t0 = float(obs[OBSERVATION_FIELDS["time"]][0])
+        assert 6.0 <= t0 <= 9.0 and t0 == pytest.approx(env.unwrapped.episode_parameters["start_time"], abs=dt / 2)
+        step = round(t0 / dt)  # the observation's time is float32
+        p_ref, v_ref = (np.ravel(a) for a in env.unwrapped.reference.sample(step * dt)[:2])
+        assert info["p_ref"] == pytest.approx(p_ref, abs=1e-9)
+        assert obs[OBSERVATION_FIELDS["p_world"]] == pytest.approx(p_ref, abs=1e-6)
+        assert obs[OBSERVATION_FIELDS["v_world"]] == pytest.approx(v_ref, abs=1e-6)
+        assert obs[OBSERVATION_FIELDS["p_error"]] == pytest.approx(np.zeros(3), abs=1e-6)
+        starts.add(t0)
+    assert len(starts) == 3
+    # without perturbation and noise the vehicle starts on the reference: a short flight to the end
+    env = gym.make("WallInspector/WallSweep-v0", randomize={"start_time": (16.9, 16.9)}, **QUIET)
+    env.reset(seed=0)
+    steps, truncated = 0, False
+    while not truncated:
+        _, _, terminated, truncated, _ = env.step(np.zeros(4))
+        steps += 1
+        assert not terminated
+    assert steps == round((17.0 - 16.9) / dt)
+    env.close()
+
+
 def test_extra_effects_and_model_files_reach_the_simulator(tmp_path):
     env = gym.make("WallInspector/WallHover-v0", standoff=2.0, effects={"constant_force": {"F": [0.5, 0, 0]}}, **QUIET)
     env.reset(seed=0, options={"perturb_start": False})
@@ -220,6 +250,7 @@ def test_extra_effects_and_model_files_reach_the_simulator(tmp_path):
         ({"randomize": {"wind": (0, 1)}}, r"randomize keys must be among"),
         ({"randomize": {"k_s": (5, 1)}}, r"randomize\['k_s'\] must have low <= high"),
         ({"randomize": {"standoff": (0.01, 0.3)}}, r"randomize\['standoff'\] must be in \[0\.1157"),
+        ({"randomize": {"start_time": (0.0, 10.0)}, "duration": 2.0}, r"randomize\['start_time'\] must be in \[0, 1\.99\]"),
         ({"render_mode": "video"}, r"render_mode must be None or one of"),
         ({"physics_substeps": 0}, r"physics_substeps must be an integer in \[1, 100\]"),
         ({"control_dt": 0.5}, r"control_dt must be in \[0\.001, 0\.05\]"),

@@ -314,10 +314,13 @@ class EnvBatch:
             offset = np.zeros((1, 3))
         self.ref_offset[rows] = offset
 
+        # the control step the episode starts at: 0, or the drawn start_time along the reference
+        start = (np.zeros(k, dtype=np.int64) if "start_time" not in sample else
+                 np.clip(np.rint(sample["start_time"] / cfg.control_dt).astype(np.int64), 0, cfg.n_steps - 1))
         spread = np.reshape(np.asarray(spread, dtype=float), (-1, 1))
         perturb = (2.0 * u[:, len(ranges) + pushed:] - 1.0) * spread
-        p0 = self._ref_p[0] + offset + perturb[:, 0:3] * task.start_position_noise
-        v0 = self._ref_v[0] + perturb[:, 3:6] * task.start_velocity_noise
+        p0 = self._ref_p[start] + offset + perturb[:, 0:3] * task.start_position_noise
+        v0 = self._ref_v[start] + perturb[:, 3:6] * task.start_velocity_noise
         tilt = perturb[:, 6:9] * task.start_attitude_noise
         tilt[:, 2] += self._yaw
         q = euler_xyz_to_quat_rows(tilt)
@@ -332,7 +335,7 @@ class EnvBatch:
         if self.surfaces is not None:
             self._query_surfaces(rows)
             self.surface_contact[rows] = False
-        self.step_index[rows] = 0
+        self.step_index[rows] = start
         self.previous_action[rows] = 0.0
         self.collisions[rows] = 0
         self.command[rows] = 0.0

@@ -36,10 +36,11 @@ DEFAULT_REWARD_WEIGHTS = {"alive": 1.0, "position": 2.0, "velocity": 0.2, "smoot
 # per-episode settings the envs can draw, in the order of the random draws at reset: the suction's k_s (N/m)
 # and d_thr (m), the stand-off (m) and mass (kg); a steady horizontal push (N, its direction uniform in the
 # horizontal plane: one more draw), the rotors' time constant (s), the latency (s, the round trip, split
-# evenly between command and observation, in whole physics steps), and factors on the configured sensing
-# error and turbulence intensity
+# evenly between command and observation, in whole physics steps), factors on the configured sensing
+# error and turbulence intensity, and the time along the reference at which the episode starts (s; a start-state
+# curriculum: every part of a long path is met from the first updates on, not only once the agent survives to it)
 RANDOMIZABLE = ("k_s", "d_thr", "standoff", "mass", "push", "motor_time_constant", "latency", "sensing_scale",
-                "gust_scale")
+                "gust_scale", "start_time")
 RENDER_MODES = ("human", "rgb_array")
 MAX_EPISODE_STEPS = 1_000_000  # the longest episode (duration / control_dt) any settings allow
 
@@ -265,7 +266,8 @@ class EnvConfig:
         base_scene = Scene((), ground_z, ceiling_z)
         params = spec.check_params(task_params)
         truth = _with_conditions(truth, flight_conditions, push=isinstance(randomize, dict) and "push" in randomize)
-        ranges = _check_randomize(randomize, truth, vehicle_params, lowest, flight_conditions)
+        ranges = _check_randomize(randomize, truth, vehicle_params, lowest, flight_conditions,
+                                  duration - control_dt)
         physics_dt = control_dt / int(physics_substeps)
         flight_conditions.latency.physics_steps(physics_dt)  # whole physics steps, or a ValueError
         lags = [vehicle_params.motor_time_constant, *ranges.get("motor_time_constant", ())]
@@ -350,8 +352,8 @@ def _preview_stride(control_dt: float) -> int:
     return max(1, int(round(PREVIEW_DT / control_dt)))
 
 
-def _check_randomize(ranges: Any, truth: AeroModel, vehicle: VehicleParams,
-                     lowest_standoff: float, conditions: FlightConditions) -> dict[str, tuple[float, float]]:
+def _check_randomize(ranges: Any, truth: AeroModel, vehicle: VehicleParams, lowest_standoff: float,
+                     conditions: FlightConditions, last_start: float) -> dict[str, tuple[float, float]]:
     if ranges is None:
         return {}
     if not isinstance(ranges, dict):
@@ -398,6 +400,8 @@ def _check_randomize(ranges: Any, truth: AeroModel, vehicle: VehicleParams,
                 raise ValueError("randomize['gust_scale'] scales the turbulence of conditions, which has none; "
                                  "give conditions={'wind': 'light'} or another")
             lo, hi = 0.0, 10.0
+        elif key == "start_time":  # s along the reference; the last start leaves one control step to fly
+            lo, hi = 0.0, max(0.0, last_start)
         else:
             if key not in limits:
                 raise ValueError(f"{name} needs the wall_suction effect in the simulator")

@@ -101,7 +101,9 @@ class WallInspectorEnv(gym.Env):
     randomize: per-episode uniform ranges, e.g. ``{"k_s": (2, 8), "mass": (0.9, 1.1)}``, for
         ``k_s``, ``d_thr``, ``standoff``, ``mass``, ``push`` (N, a steady horizontal force in a random
         direction), ``motor_time_constant`` (s), ``latency`` (s, the round trip), ``sensing_scale`` and
-        ``gust_scale`` (factors on the sensing error and turbulence of ``conditions``).
+        ``gust_scale`` (factors on the sensing error and turbulence of ``conditions``), and ``start_time``
+        (s: the episode starts that far along the reference, at its position and velocity there, and its
+        ``time`` observation starts there; a start-state curriculum for long paths).
     conditions: flight conditions (:mod:`wall_env.conditions`): ``"ideal"`` (default), ``"realistic"``
         (motion-capture sensing, 20 ms latency, 30 ms motor lag, light turbulence) or a dict of
         ``sensing``, ``latency``, ``motor_time_constant`` and ``wind``. The observation then carries the
