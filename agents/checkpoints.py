@@ -45,6 +45,8 @@ from typing import Any
 
 import numpy as np
 
+from agents.learning_curve import LEARNING_CURVE_PNG, card_curve, plot_learning_curve, shipped_timesteps
+
 __all__ = [
     "MODEL_FILE",
     "POLICY_FILE",
@@ -347,6 +349,19 @@ def write_model_card(folder: str | Path, card: dict[str, Any]) -> tuple[Path, Pa
         lines += ["", "## Development runs", "", development.get("note", ""), "",
                   "| run | env steps | wall time (s) |", "| --- | ---: | ---: |"]
         lines += [f"| {r.get('what')} | {int(r['env_steps']):,} | {_fmt(r.get('wall_time_s'))} |" for r in development["runs"]]
+    curve = card_curve(card)
+    if curve is not None:
+        randomized = bool(card.get("randomize"))
+        episodes = ((card.get("config") or {}).get("eval") or {}).get("episodes")
+        note = (f"{episodes or 'the'} evaluation episodes at each point, deterministic actions, "
+                + ("drawn like the training's (its randomisation included)" if randomized
+                   else "on the training's settings"))
+        plot_learning_curve(curve, folder / LEARNING_CURVE_PNG, title=f"Learning curve: {card.get('env_id', '?')}",
+                            shipped_at=shipped_timesteps(card.get("checkpoint")), note=note)
+        lines += ["", "## Learning curve", "",
+                  f"![Mean evaluation return and episode length against env steps]({LEARNING_CURVE_PNG})", "",
+                  f"Mean return and length of the evaluations during training ({note}); the green line is the "
+                  "shipped checkpoint. The figures of the evaluation above are the model card's own flights.", ""]
     robustness = card.get("robustness")
     if robustness:
         lines += ["", "## Robustness", "", robustness.get("text", "")]

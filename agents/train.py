@@ -503,12 +503,16 @@ def ship(run_dir: Path, task: str, residual: str | None = None, warm_start: str 
     A warm-started agent has its own folder: it learned from the controller it is compared with,
     so it never takes the place of the agent that learned the task alone (the comparison's PPO)."""
     from agents.checkpoints import copy_checkpoint
+    from agents.learning_curve import LEARNING_CURVE_PNG
     from agents.policy import pretrained_path
 
     variant = (f"residual_{residual}" if residual else f"warm_start_{warm_start}" if warm_start
                else f"teacher_{teacher}" if teacher else "")
     target = pretrained_path(task, variant)
     copy_checkpoint(run_dir / "best", target)
-    for name in ("model_card.json", "model_card.md"):
-        (target / name).write_bytes((run_dir / name).read_bytes())
+    for name in ("model_card.json", "model_card.md", LEARNING_CURVE_PNG):
+        if (run_dir / name).is_file():
+            (target / name).write_bytes((run_dir / name).read_bytes())
+        else:
+            (target / name).unlink(missing_ok=True)  # no stale picture of another run
     return target

@@ -138,3 +138,39 @@ def test_checkpoint_of_the_earlier_json_format_is_named_and_upgraded_exactly(che
     np.testing.assert_array_equal(upgraded.obs_rms.var, stats.obs_rms.var)
     obs = np.asarray(json.loads((folder / "policy.json").read_text())["check"]["observations"], dtype=np.float32)
     np.testing.assert_array_equal(load_policy(folder).predict(obs)[0], load_policy(checkpoint).predict(obs)[0])
+
+
+def test_a_model_card_with_an_evaluation_history_carries_its_learning_curve(tmp_path):
+    from matplotlib.image import imread
+
+    from agents.checkpoints import write_model_card
+    from agents.learning_curve import LEARNING_CURVE_PNG, shipped_timesteps
+
+    card = {"env_id": "WallInspector/WallSweep-v0", "checkpoint": "best/ at 300000 timesteps (best mean evaluation "
+            "return 90.0)", "config": {"eval": {"episodes": 5}},
+            "training": {"eval_curve": [[100000, 10.0, 50.0], [200000, 40.0, 80.0], [300000, 90.0, 170.0],
+                                        [200000, 45.0, 85.0], [400000, 80.0, 160.0]]}}  # resumed from 200k
+    _, md = write_model_card(tmp_path, card)
+    text = md.read_text()
+    assert f"![Mean evaluation return and episode length against env steps]({LEARNING_CURVE_PNG})" in text
+    assert "5 evaluation episodes at each point" in text and "on the training's settings" in text
+    picture = imread(tmp_path / LEARNING_CURVE_PNG)
+    assert picture.shape[0] > 300 and picture.shape[1] > 600 and picture.std() > 0.05  # drawn, not blank
+    assert shipped_timesteps(card["checkpoint"]) == 300000 and shipped_timesteps("best/") is None
+    # one evaluation is no curve: no picture and no section
+    (tmp_path / LEARNING_CURVE_PNG).unlink()
+    _, md = write_model_card(tmp_path, {**card, "training": {"eval_curve": [[100000, 10.0, 50.0]]}})
+    assert "Learning curve" not in md.read_text() and not (tmp_path / LEARNING_CURVE_PNG).exists()
+
+
+def test_every_shipped_ppo_agent_with_an_evaluation_history_has_its_learning_curve():
+    from agents.checkpoints import read_json
+    from agents.learning_curve import LEARNING_CURVE_PNG, card_curve
+    from agents.policy import PRETRAINED_DIR
+
+    folders = [f for f in sorted(PRETRAINED_DIR.iterdir()) if (f / "model_card.json").is_file()]
+    with_curve = [f for f in folders if card_curve(read_json(f / "model_card.json")) is not None]
+    assert len(with_curve) >= 4
+    for folder in with_curve:
+        assert (folder / LEARNING_CURVE_PNG).is_file(), folder
+        assert f"]({LEARNING_CURVE_PNG})" in (folder / "model_card.md").read_text(), folder
