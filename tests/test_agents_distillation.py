@@ -99,7 +99,8 @@ def test_train_algo_dagger_writes_a_distilled_agent_of_its_own(tmp_path, monkeyp
     out = tmp_path / "distilled"
     code = main(["train", "--env", HOVER, "--algo", "dagger", "--seed", "1", "--out", str(out), "--no-progress", "--quiet",
                  "--set", "teacher.controller=pid", "--set", "teacher.envs=4", "--set", "teacher.steps=120",
-                 "--set", "teacher.epochs=4", "--set", "card_eval.episodes=1", "--eval-episodes", "1"])
+                 "--set", "teacher.epochs=4", "--set", "teacher.iterations=3", "--set", "card_eval.episodes=1",
+                 "--eval-episodes", "1"])
     assert code == 0
     card = json.loads((out / "model_card.json").read_text())
     teacher = card["training"]["teacher"]

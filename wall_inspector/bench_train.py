@@ -118,11 +118,14 @@ def _train(args: argparse.Namespace, out: Path, extra: list[str]) -> dict[str, A
 
 
 def _run_row(seed: int, card: dict[str, Any], target_m: float) -> dict[str, Any]:
+    from agents.checkpoints import training_env_steps
+
     t, m = card["training"], card["evaluation"]["metrics"]
     reached = bool(m["wall_normal_rmse_m"] <= target_m and m["collisions"] == 0)
+    steps = training_env_steps(t)  # PPO's, a warm start's demonstrations and a teacher's labelled flights
     return {"seed": seed, "reached": reached, "training_wall_time_s": t["wall_time_s"],
-            "command_wall_time_s": t.get("command_wall_time_s"), "env_steps": t["total_timesteps"],
-            "env_steps_per_s": t["steps_per_s"], "wall_normal_rmse_cm": round(100 * m["wall_normal_rmse_m"], 3),
+            "command_wall_time_s": t.get("command_wall_time_s"), "env_steps": steps,
+            "env_steps_per_s": round(steps / max(float(t["wall_time_s"]), 1e-9), 1), "wall_normal_rmse_cm": round(100 * m["wall_normal_rmse_m"], 3),
             "collisions": m["collisions"], "completed": m["completed"], "time_split": t.get("time_split"),
             "threads": t.get("threads"), "teacher_labels": (t.get("teacher") or {}).get("labels")}
 
