@@ -125,7 +125,8 @@ def _run_row(seed: int, card: dict[str, Any], target_m: float) -> dict[str, Any]
     steps = training_env_steps(t)  # PPO's, a warm start's demonstrations and a teacher's labelled flights
     return {"seed": seed, "reached": reached, "training_wall_time_s": t["wall_time_s"],
             "command_wall_time_s": t.get("command_wall_time_s"), "env_steps": steps,
-            "env_steps_per_s": round(steps / max(float(t["wall_time_s"]), 1e-9), 1), "wall_normal_rmse_cm": round(100 * m["wall_normal_rmse_m"], 3),
+            "env_steps_per_s": round(steps / max(float(t["wall_time_s"]), 1e-9), 1),
+            "wall_normal_rmse_cm": round(100 * m["wall_normal_rmse_m"], 3),
             "collisions": m["collisions"], "completed": m["completed"], "time_split": t.get("time_split"),
             "threads": t.get("threads"), "teacher_labels": (t.get("teacher") or {}).get("labels")}
 
