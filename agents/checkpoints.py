@@ -190,6 +190,39 @@ def _check_actions(model: Any, vec_normalize: Any, observations: np.ndarray) -> 
     return np.asarray(actions, dtype=np.float64)
 
 
+_ADAM_STATE = frozenset({"step", "exp_avg", "exp_avg_sq"})
+
+
+def drop_half_made_optimizer_state(optimizer: Any) -> list[int]:
+    """Forget a parameter's optimiser state that a Ctrl-C left half made; the indices of such parameters.
+
+    Adam makes a parameter's state at its first step, ``step`` before ``exp_avg`` and ``exp_avg_sq``:
+    interrupted between them, the state saved with the checkpoint lacks its moments, and the run resumed
+    from it fails in its first update (``KeyError: 'exp_avg'``). Such a state is dropped, and the
+    optimiser makes it afresh at its next step, as it does for a parameter it has not yet stepped.
+    For optimisers other than Adam's family, a state with fewer entries than the fullest is half made.
+    """
+    if optimizer is None or not getattr(optimizer, "state", None):
+        return []
+    import torch
+
+    states = {id(p): optimizer.state[p] for group in optimizer.param_groups for p in group["params"] if p in optimizer.state}
+    made = [set(state) for state in states.values() if state]
+    if not made:
+        return []
+    if isinstance(optimizer, (torch.optim.Adam, torch.optim.AdamW)):
+        required = set(_ADAM_STATE) | ({"max_exp_avg_sq"} if any(g.get("amsgrad") for g in optimizer.param_groups) else set())
+    else:
+        required = max(made, key=len)
+    dropped = []
+    for index, p in enumerate(p for group in optimizer.param_groups for p in group["params"]):
+        state = optimizer.state.get(p)
+        if state and not required <= set(state):
+            del optimizer.state[p]
+            dropped.append(index)
+    return dropped
+
+
 def save_checkpoint(folder: str | Path, model: Any, vec_normalize: Any, policy_info: dict[str, Any],
                     check_observations: np.ndarray | None = None) -> Path:
     """Write ``model.zip``, ``vecnormalize.pkl`` and ``policy.json`` into ``folder``.
@@ -199,6 +232,7 @@ def save_checkpoint(folder: str | Path, model: Any, vec_normalize: Any, policy_i
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    drop_half_made_optimizer_state(getattr(getattr(model, "policy", None), "optimizer", None))
     model.save(folder / MODEL_FILE)
     save_vecnormalize(vec_normalize, folder / VECNORMALIZE_FILE)
     info = {"format": FORMAT_VERSION, **policy_info}

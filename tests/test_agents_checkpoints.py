@@ -174,3 +174,31 @@ def test_every_shipped_ppo_agent_with_an_evaluation_history_has_its_learning_cur
     for folder in with_curve:
         assert (folder / LEARNING_CURVE_PNG).is_file(), folder
         assert f"]({LEARNING_CURVE_PNG})" in (folder / "model_card.md").read_text(), folder
+
+
+def test_an_optimiser_state_that_ctrl_c_left_half_made_is_not_saved(tmp_path):
+    """Adam makes a parameter's state at its first step, ``step`` before its moments: a Ctrl-C between them
+    used to be saved, and the resumed run failed in its first update with KeyError: 'exp_avg'."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from agents.checkpoints import drop_half_made_optimizer_state
+
+    venv = VecNormalize(DummyVecEnv([lambda: __import__("gymnasium").make("CartPole-v1")]))
+    model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=1, seed=0, device="cpu")
+    optimizer = model.policy.optimizer
+    params = [p for group in optimizer.param_groups for p in group["params"]]
+    for p in params[:3]:  # three parameters stepped, the fourth interrupted half-way
+        optimizer.state[p] = {"step": torch.tensor(1.0), "exp_avg": torch.zeros_like(p), "exp_avg_sq": torch.zeros_like(p)}
+    optimizer.state[params[3]] = {"step": torch.tensor(0.0)}
+    save_checkpoint(tmp_path / "ckpt", model, venv, {"env_id": "CartPole-v1"})
+    loaded = PPO.load(tmp_path / "ckpt" / "model.zip", device="cpu")
+    loss = sum((p * p).sum() for p in loaded.policy.parameters())
+    loss.backward()
+    loaded.policy.optimizer.step()  # raised KeyError: 'exp_avg' with the half-made state saved
+    kept = loaded.policy.optimizer.state
+    assert all({"exp_avg", "exp_avg_sq"} <= set(kept[p]) for p in loaded.policy.parameters())
+    # a complete state is left alone
+    assert drop_half_made_optimizer_state(model.policy.optimizer) == []
+    assert len([p for p in params if p in optimizer.state]) == 3

@@ -209,8 +209,10 @@ def test_ship_puts_the_best_checkpoint_and_card_where_load_policy_finds_them(cli
     monkeypatch.setattr(agents.policy, "PRETRAINED_DIR", tmp_path / "pretrained")
     target = ship(cli_run, "WallInspector/WallHover-v0")
     assert target == tmp_path / "pretrained" / "wall_hover"
-    assert sorted(p.name for p in target.iterdir()) == ["model.zip", "model_card.json", "model_card.md",
-                                                       "policy.json", "vecnormalize.pkl"]
+    # the run evaluated more than once, so its card carries the learning curve, which ships beside it
+    assert sorted(p.name for p in target.iterdir()) == ["learning_curve.png", "model.zip", "model_card.json",
+                                                       "model_card.md", "policy.json", "vecnormalize.pkl"]
+    assert "](learning_curve.png)" in (target / "model_card.md").read_text()
     shipped = load_policy("WallHover-v0")
     best = load_policy(cli_run / "best")
     obs = np.asarray(json.loads((target / "policy.json").read_text())["check"]["observations"], dtype=np.float32)
