@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from wall_env.run_lock import lock_path
 
@@ -54,3 +55,37 @@ def test_compare_interrupted_twenty_times_gives_the_uninterrupted_tables(tmp_pat
         assert (tmp_path / "cut" / name).read_bytes() == (tmp_path / "whole" / name).read_bytes()
     assert not (tmp_path / "cut" / ".flights").exists()  # cleared once complete
     assert json.loads((tmp_path / "cut" / "results.json").read_text())["runs"]
+
+
+def test_a_ctrl_c_while_the_settings_are_written_does_not_refuse_the_rerun(tmp_path, monkeypatch):
+    """Seen on CI: Ctrl-C landed while the first flight's settings file was half written, and every rerun then
+    read a different signature and stopped with exit code 2."""
+    from controllers.evaluation import EpisodeRecord
+    from wall_inspector.compare import FinishedFlights, UsageError
+
+    n = 3
+    record = EpisodeRecord(seed=4, time=np.arange(n) * 0.02, p_world=np.zeros((n, 3)), p_ref=np.zeros((n, 3)),
+                           wall_normal=np.tile([1.0, 0.0, 0.0], (n, 1)), collision=np.zeros(n, bool),
+                           wall_clearance=np.full(n, 0.1), action=np.zeros((n, 4)), command=np.zeros((n, 4)),
+                           hover_thrust=3.3, terminated=False, solve_times=[0.001] * n)
+    signature = {"seeds": [4], "duration": 1.0, "policies": ["pid", "mpc", "sc-mpc"]}
+    real_write_text = Path.write_text
+
+    def cut_off_halfway(path, text, *args, **kwargs):
+        real_write_text(path, text[: len(text) // 2], *args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Path, "write_text", cut_off_halfway)
+    try:
+        FinishedFlights(tmp_path, signature).save("flight", record)
+    except KeyboardInterrupt:
+        pass
+    monkeypatch.setattr(Path, "write_text", real_write_text)
+    rerun = FinishedFlights(tmp_path, signature)  # raised UsageError before the settings were written whole
+    assert rerun.load("flight") is None  # nothing of the cut-off save counts as a flown flight
+    rerun.save("flight", record)
+    assert rerun.load("flight").wall_clearance == pytest.approx([0.1] * n)
+    assert FinishedFlights(tmp_path, signature).load("flight").seed == 4
+    other = dict(signature, duration=2.0)
+    with pytest.raises(UsageError, match="--out .* other settings"):
+        FinishedFlights(tmp_path, other)

@@ -155,7 +155,11 @@ class FinishedFlights:
         import numpy as np
 
         self.folder.mkdir(parents=True, exist_ok=True)
-        (self.folder / "settings.json").write_text(self.signature)
+        stored = self.folder / "settings.json"
+        if not stored.is_file():  # written whole or not at all: a half-written one would refuse every rerun
+            temporary = self.folder / ".settings.tmp.json"
+            temporary.write_text(self.signature)
+            os.replace(temporary, stored)
         values = {f.name: np.asarray(getattr(record, f.name)) for f in dataclasses.fields(record)}
         temporary = self.folder / f".{key}.tmp.npz"
         np.savez(temporary, **values)  # type: ignore[arg-type]  # keyword arrays
