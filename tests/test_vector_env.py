@@ -312,3 +312,54 @@ def test_a_non_finite_action_row_is_named_in_a_short_message():
     with pytest.raises(ValueError) as error:
         envs.step(actions)
     assert "1 of 1024 rows are not (row 517: [0.0, 0.0, nan, 0.0])" in str(error.value) and len(str(error.value)) < 200
+
+
+def _wall_clearance(x, vehicle):
+    """Clearance (m) of states ``x`` from the wall x = 0 (normal +x) by the contact module's equation: the
+    deepest point of each duct, ``n . c - (h / 2) |n . a| - r sqrt(1 - (n . a)^2)``, and of the central box."""
+    from wall_env.state import StateIndex
+
+    shapes = collision_shapes(vehicle)
+    R = Rotation.from_quat(np.roll(x[:, StateIndex.q_body_to_world], -1, axis=1)).as_matrix()  # (k, 3, 3)
+    p = x[:, StateIndex.p_world]
+    along = R[:, 0, 2]  # n . body z
+    across = np.sqrt(np.clip(1.0 - along**2, 0.0, None))
+    ducts = [p[:, 0] + (R @ centre)[:, 0] - shapes.duct_height / 2 * np.abs(along) - shapes.duct_radius * across
+             for centre in shapes.duct_centres]
+    box = p[:, 0] - sum(e * np.abs(R[:, 0, i]) for i, e in enumerate(shapes.box_half_extents))
+    return np.min(np.stack([*ducts, box], axis=1), axis=1)
+
+
+def test_no_perturbed_start_touches_the_wall_and_clear_starts_stay_as_drawn(monkeypatch):
+    """WallHover's 5 cm position spread about a start 4.7 cm clear of the wall put 2.8 % of its starts inside the
+    wall (their episodes ended in contact at the first step). A start closer than ``START_CLEARANCE`` is mirrored
+    back out across it, along the wall's normal; every other start is exactly as drawn."""
+    import wall_env.batch as batch
+    from wall_env.state import StateIndex
+
+    margin, n = batch.START_CLEARANCE, 4000
+    assert 0.005 <= margin <= 0.02
+
+    def starts(clearance):
+        monkeypatch.setattr(batch, "START_CLEARANCE", clearance)
+        envs = make_vec(n=n)
+        envs.reset(seed=11)
+        x = envs.unwrapped.batch.simulator.x.copy()
+        envs.close()
+        return x
+
+    drawn, kept = starts(-np.inf), starts(margin)
+    vehicle = VehicleParams()
+    c_drawn, c_kept = _wall_clearance(drawn, vehicle), _wall_clearance(kept, vehicle)
+    assert np.mean(c_drawn < 0.0) > 0.01  # as drawn, some starts are inside the wall
+    assert c_kept.min() >= margin - 1e-8
+    clear = c_drawn >= margin
+    assert 0.8 < clear.mean() < 0.95
+    np.testing.assert_array_equal(kept[clear], drawn[clear])
+    near = ~clear
+    np.testing.assert_allclose(c_kept[near], 2 * margin - c_drawn[near], atol=1e-8)  # mirrored across the margin
+    moved = kept[:, StateIndex.p_world] - drawn[:, StateIndex.p_world]
+    np.testing.assert_allclose(moved[near, 1:], 0.0, atol=1e-12)  # along the wall's normal only
+    others = np.ones(kept.shape[1], dtype=bool)
+    others[StateIndex.p_world] = False
+    np.testing.assert_array_equal(kept[:, others], drawn[:, others])  # attitude, velocity, rotors as drawn

@@ -36,8 +36,8 @@ import numpy as np
 from wall_env.scene import SceneSymbols
 from wall_env.vehicle import VehicleParams
 
-__all__ = ["CollisionShapes", "collision_shapes", "scene_planes", "contact_response", "plane_response", "respond",
-           "SURFACES"]
+__all__ = ["CollisionShapes", "collision_shapes", "scene_planes", "plane_clearances", "contact_response",
+           "plane_response", "respond", "SURFACES"]
 
 
 @dataclass(frozen=True)
@@ -91,15 +91,19 @@ def _shape_distances(p: ca.SX, R: ca.SX, shapes: CollisionShapes, point, normal)
     return distances
 
 
+def plane_clearances(p: ca.SX, R: ca.SX, symbols: SceneSymbols, shapes: CollisionShapes) -> list[ca.SX]:
+    """Signed distance (m) of the vehicle's deepest point from each of the scene's planes (walls, ground,
+    ceiling, in :func:`scene_planes`' order): positive when clear, minus the penetration when inside."""
+    planes, _ = scene_planes(symbols)
+    return [ca.mmin(ca.vertcat(*_shape_distances(p, R, shapes, point, normal))) for point, normal in planes]
+
+
 def contact_response(p: ca.SX, R: ca.SX, v: ca.SX, symbols: SceneSymbols, shapes: CollisionShapes,
                      restitution: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
     """``(p_after, v_after, penetrations)``: the response described in the module docstring;
     ``penetrations`` has one entry per plane (walls, ground, ceiling), zero when clear."""
     planes, _ = scene_planes(symbols)
-    depths = []
-    for point, normal in planes:
-        deepest = ca.mmin(ca.vertcat(*_shape_distances(p, R, shapes, point, normal)))
-        depths.append(ca.fmax(-deepest, 0.0))
+    depths = [ca.fmax(-clearance, 0.0) for clearance in plane_clearances(p, R, symbols, shapes)]
     for (_, normal), depth in zip(planes, depths):
         p, v = plane_response(p, v, normal, depth, restitution)
     penetrations = ca.vertcat(*depths) if depths else ca.SX.zeros(0, 1)

@@ -43,7 +43,7 @@ import numpy as np
 
 from wall_env.aero import AeroModel, symbolic_scene
 from wall_env.codegen import NATIVE_FLAGS, BatchedFunction, CompiledFunction
-from wall_env.contact import collision_shapes, contact_response
+from wall_env.contact import collision_shapes, contact_response, plane_clearances, scene_planes
 from wall_env.effects import FlightContext
 from wall_env.motor_lag import thrust_rate
 from wall_env.rotations import quat_multiply, quat_to_rotation
@@ -255,6 +255,22 @@ def build_env_step_function(
     )
 
 
+@lru_cache(maxsize=32)
+def build_clearance_function(vehicle: VehicleParams, scene_structure: tuple) -> ca.Function:
+    """``clearance(x[17], scene) -> (clearances[n_planes], normals[3 x n_planes])``: how far the vehicle in
+    state ``x`` is from each plane of the scene (:func:`wall_env.contact.plane_clearances`, negative inside)
+    and each plane's outward unit normal. Called with ``k`` states and scenes as columns, it maps over them."""
+    xs = ca.SX.sym("x", STATE_SIZE)
+    scene_symbols, scene_vector = symbolic_scene(scene_structure)
+    R = quat_to_rotation(xs[StateIndex.q_body_to_world])
+    clearances = plane_clearances(xs[StateIndex.p_world], R, scene_symbols, collision_shapes(vehicle))
+    normals = [normal for _, normal in scene_planes(scene_symbols)[0]]
+    return ca.Function("clearance", [xs, scene_vector],
+                       [ca.vertcat(*clearances) if clearances else ca.SX.zeros(0, 1),
+                        ca.horzcat(*normals) if normals else ca.SX.zeros(3, 0)],
+                       ["x", "scene"], ["clearances", "normals"])
+
+
 def _step_key(vehicle: VehicleParams) -> VehicleParams:
     """The vehicle as the compiled step's cache key: mass and motor time constant are inputs."""
     return dataclasses.replace(vehicle, mass=1.0, motor_time_constant=0.0)
@@ -290,6 +306,7 @@ class BatchSimulator:
         self.timing[:, Timing.motor_time_constant] = vehicle.motor_time_constant
         (self.x_next, self.forces, self.distances, self.R, self.penetrations, self.x_observed,
          self.rotor_suction) = self._step.outputs(n)
+        self._clearance = build_clearance_function(_step_key(vehicle), scene_structure)
         self._step.bind([self.x, self.u, self.u_previous, self.timing, self.mass, self.theta, self.scene,
                          self.restitution],
                         [self.x_next, self.forces, self.distances, self.R, self.penetrations, self.x_observed,
@@ -298,6 +315,18 @@ class BatchSimulator:
     def step(self) -> None:
         """Advance every vehicle one control step (inputs and outputs: the arrays above)."""
         self._step()
+
+    def clearances(self, x: np.ndarray, scene: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """How far vehicles in states ``x`` ``(k, 17)`` are from each plane of scenes ``scene`` ``(k, S)``
+        (``(k, n_planes)`` m, negative inside) and the planes' outward normals ``(k, 3, n_planes)``."""
+        k = x.shape[0]
+        n_planes = self._clearance.size1_out(0)
+        if k == 0 or n_planes == 0:
+            return np.zeros((k, n_planes)), np.zeros((k, 3, n_planes))
+        clearances, normals = self._clearance(x.T, scene.T)
+        clearances = np.asarray(clearances).reshape(n_planes, k).T
+        normals = np.asarray(normals).reshape(3, k, n_planes).transpose(1, 0, 2)
+        return clearances, normals
 
 
 class Simulator:

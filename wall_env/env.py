@@ -15,7 +15,10 @@ Reward (weights in ``reward_weights``)
     vehicle strays more than ``max_tracking_error`` from the reference.
 Reset options
     ``{"perturb_start": False}`` starts exactly on the reference (default: a uniform
-    perturbation of position, velocity and attitude whose size each task sets).
+    perturbation of position, velocity and attitude whose size each task sets; a start
+    it would bring within ``wall_env.batch.START_CLEARANCE`` (1 cm) of a wall, the ground
+    or the ceiling is mirrored back out along the plane's normal, so no episode starts
+    touching a surface).
 Episode end
     terminated on a collision (unless ``terminate_on_collision=False``, when the vehicle
     bounces off and the collision is counted) or when straying; truncated at the
