@@ -206,8 +206,7 @@ def drop_half_made_optimizer_state(optimizer: Any) -> list[int]:
         return []
     import torch
 
-    states = {id(p): optimizer.state[p] for group in optimizer.param_groups for p in group["params"] if p in optimizer.state}
-    made = [set(state) for state in states.values() if state]
+    made = [set(state) for state in optimizer.state.values() if state]
     if not made:
         return []
     if isinstance(optimizer, (torch.optim.Adam, torch.optim.AdamW)):
