@@ -12,9 +12,11 @@ Keys:
 ``motor_lag``
     ``null`` when no lag was looked for (the vehicle block gives ``motor_time_constant``,
     or one effect was fitted alone), else the lag fitted next to the chosen effects
-    (:mod:`discovery.motor_lag`): ``{"time_constant_s", "std_s", "explained", "force_rms_N",
-    "kept", "reason", "determined", "moves"}`` (``moves``: the chosen parameter the lag would
-    change most, when by more than 5 % and two standard errors). A kept lag is the model
+    (:mod:`discovery.motor_lag`): ``{"time_constant_s", "std_s", "interval_95_share", "to_narrow",
+    "explained", "force_rms_N", "kept", "reason", "determined", "moves"}`` (``interval_95_share``:
+    the 95 % interval's half-width as a share of the time constant; ``to_narrow``: the manoeuvre
+    that determines it better when that share is above 10 %, else ``null``; ``moves``: the chosen
+    parameter the lag would change most, when by more than 5 % and two standard errors). A kept lag is the model
     file's vehicle ``motor_time_constant``, and the effects above were chosen with it.
 ``gap_before``, ``gap_after``
     ``{"force_rms_N", "prediction_rms_m"}`` on held-out data for the nominal and the
@@ -210,6 +212,9 @@ def format_summary(report: dict[str, Any]) -> str:
         lines.append(f"found a motor lag: time_constant={_fmt(lag['time_constant_s'])} +- {_fmt(lag['std_s'])} s (the "
                      f"rotors produce the logged thrust late); explains {100 * lag['explained']:.0f} % of the held-out "
                      "residual; written as the model's vehicle motor_time_constant")
+        if lag.get("to_narrow"):
+            lines.append(f"  the flight determines the motor lag only to +-{100 * lag['interval_95_share']:.0f} % (95 % "
+                         f"interval); to narrow it: {lag['to_narrow']}")
     noise = (report.get("noise") or {}).get("floor_N")
     after = (report.get("gap_after") or {}).get("force_rms_N")
     if not report["effects"] and not (lag and lag["kept"]):

@@ -61,6 +61,8 @@ def test_a_motor_lag_from_another_simulator_is_found_and_leaves_the_vertical_dra
     lag = found.motor_lag_
     assert lag["kept"] and lag["time_constant_s"] == pytest.approx(0.03, rel=0.1)
     assert lag["time_constant_s"] > 3 * lag["std_s"]
+    assert lag["interval_95_share"] == pytest.approx(1.96 * lag["std_s"] / lag["time_constant_s"])
+    assert (lag["to_narrow"] is not None) == (lag["interval_95_share"] > 0.1)
     assert found.model_.vehicle.motor_time_constant == lag["time_constant_s"]
     assert max(relative_errors(found.effects_[0].values, {"D": D})) < 0.1
     # the gap is measured against the user's nominal model, which has no lag
@@ -147,3 +149,23 @@ def test_a_start_error_is_never_fitted_to_the_rows_it_is_scored_on(tmp_path):
                 assert theta[1 + s] != 0.0
     others = [float(theta[1]) for k, theta in enumerate(fold_theta) if k != 0]
     assert others == pytest.approx([float(full.theta[1])] * 4, rel=0.05)
+
+
+@pytest.mark.parametrize("std_s, says", [(0.0009, False), (0.0019, True)])
+def test_a_lag_the_flight_determines_loosely_is_given_with_its_interval_and_the_manoeuvre(std_s, says):
+    """One minute of a climb and descent at one pace determines a 30 ms lag to about 6 % (one standard error): the
+    summary then says how wide the 95 % interval is and which flight narrows it; a tight one gets no such line."""
+    from discovery.determination import MANOEUVRES
+    from discovery.report import format_summary
+
+    share = 1.96 * std_s / 0.031
+    lag = {"time_constant_s": 0.031, "std_s": std_s, "interval_95_share": share,
+           "to_narrow": MANOEUVRES[("motor_lag", "time_constant")] if share > 0.1 else None,
+           "explained": 0.01, "force_rms_N": 0.02, "kept": True, "reason": "", "determined": True, "moves": None}
+    report = {"effects": [], "motor_lag": lag, "notes": [], "limits": [], "details": {"selection": {}},
+              "gap_before": {"force_rms_N": 0.3, "prediction_rms_m": 0.03},
+              "gap_after": {"force_rms_N": 0.024, "prediction_rms_m": 0.005}, "noise": {"floor_N": 0.023}}
+    text = format_summary(report)
+    assert "found a motor lag: time_constant=0.031 +- " in text
+    assert ("determines the motor lag only to +-12 % (95 % interval); to narrow it: climb and descend in steps "
+            "of different lengths" in text) == says
