@@ -324,7 +324,8 @@ class EnvBatch:
                  np.clip(np.rint(sample["start_time"] / cfg.control_dt).astype(np.int64), 0, cfg.n_steps - 1))
         spread = np.reshape(np.asarray(spread, dtype=float), (-1, 1))
         perturb = (2.0 * u[:, len(ranges) + pushed:] - 1.0) * spread
-        p0 = self._ref_p[start] + offset + perturb[:, 0:3] * task.start_position_noise
+        p_reference = self._ref_p[start] + offset
+        p0 = p_reference + perturb[:, 0:3] * task.start_position_noise
         v0 = self._ref_v[start] + perturb[:, 3:6] * task.start_velocity_noise
         tilt = perturb[:, 6:9] * task.start_attitude_noise
         tilt[:, 2] += self._yaw
@@ -335,11 +336,7 @@ class EnvBatch:
         x[:, StateIndex.v_world] = v0
         x[:, StateIndex.omega_body] = 0.0
         x[:, StateIndex.rotor_thrusts] = np.reshape(mass * (GRAVITY / 4.0), (-1, 1))
-        reference = x.copy()
-        reference[:, StateIndex.p_world] = self._ref_p[start] + offset
-        reference[:, StateIndex.q_body_to_world] = euler_xyz_to_quat_rows(
-            np.stack([np.zeros(k), np.zeros(k), np.broadcast_to(self._yaw, (k,))], axis=1))
-        self._keep_start_clear(x, reference, sim.scene[rows])
+        self._keep_start_clear(x, p_reference, sim.scene[rows])
         sim.x[rows] = x
         self.R[rows], self.distances[rows] = self._geometry(x, sim.scene[rows])
         if self.surfaces is not None:
@@ -355,15 +352,23 @@ class EnvBatch:
         self.rotor_suction[rows] = 0.0
         self._reset_conditions(rows, x, sample)
 
-    def _keep_start_clear(self, x: np.ndarray, reference: np.ndarray, scene: np.ndarray) -> None:
+    def _keep_start_clear(self, x: np.ndarray, p_reference: np.ndarray, scene: np.ndarray) -> None:
         """Mirror starts ``x`` (in place) that lie closer than :data:`START_CLEARANCE` to a plane back out across that
         clearance, along the plane's normal (a start ``c`` from the plane goes to ``2 START_CLEARANCE - c``: the
-        perturbation's spread folded, with no pile of starts at one distance); a start whose unperturbed state
-        ``reference`` is closer than that keeps the reference's clearance."""
+        perturbation's spread folded, with no pile of starts at one distance); a start whose unperturbed state (at
+        ``p_reference``, level, at the task's yaw) is closer than that keeps the unperturbed start's clearance."""
         sim = self.simulator
+        clearance, normals = sim.clearances(x, scene)
+        if np.all(clearance >= START_CLEARANCE):  # the usual reset: nothing to mirror, no unperturbed start to look at
+            return
+        reference = x.copy()
+        reference[:, StateIndex.p_world] = p_reference
+        reference[:, StateIndex.q_body_to_world] = euler_xyz_to_quat_rows(
+            np.stack([np.zeros(len(x)), np.zeros(len(x)), np.full(len(x), self._yaw)], axis=1))
         margin = np.minimum(sim.clearances(reference, scene)[0], START_CLEARANCE)
         for attempt in range(4):  # one plane at a time: a start mirrored from a wall can come nearer the ground
-            clearance, normals = sim.clearances(x, scene)
+            if attempt:
+                clearance, normals = sim.clearances(x, scene)
             short = np.clip(margin - clearance, 0.0, None)
             if not np.any(short > 1e-12):
                 return
