@@ -1,5 +1,5 @@
 """Training callbacks: progress bar, periodic checkpoints (by env steps and by wall time),
-saving the best model.
+evaluations on the same episodes every time, saving the best model.
 
 Each checkpoint is written with :func:`agents.checkpoints.save_checkpoint`, so the
 normalisation statistics always travel with the model and every checkpoint (periodic,
@@ -14,11 +14,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 from agents.checkpoints import save_checkpoint
 
-__all__ = ["ProgressBar", "PeriodicCheckpoint", "SaveBestCheckpoint", "TrainingClock", "CollisionLog", "TorchThreads",
+__all__ = ["ProgressBar", "PeriodicCheckpoint", "SameEpisodesEval", "SaveBestCheckpoint", "TrainingClock", "CollisionLog", "TorchThreads",
            "policy_info", "rollout_thread_cap", "ROLLOUT_ROWS_PER_THREAD"]
 
 
@@ -108,6 +108,21 @@ class PeriodicCheckpoint(BaseCallback):
         if self.on_save is not None:
             self.on_save(folder)
         return folder
+
+
+class SameEpisodesEval(EvalCallback):
+    """``EvalCallback`` whose every evaluation flies the same episodes: its env is seeded with
+    ``episode_seed`` before each, so a checkpoint is judged on the starts and noise the others met,
+    not on luckier ones (``EvalCallback`` alone seeds once and draws on)."""
+
+    def __init__(self, eval_env: Any, episode_seed: int, **kwargs: Any):
+        super().__init__(eval_env, **kwargs)
+        self.episode_seed = int(episode_seed)
+
+    def _on_step(self) -> bool:
+        if self.eval_freq > 0 and self.n_calls % self.eval_freq == 0:
+            self.eval_env.seed(self.episode_seed)
+        return super()._on_step()
 
 
 class SaveBestCheckpoint(BaseCallback):

@@ -28,9 +28,14 @@ from agents.config import base_controller_kwargs
 from agents.residual import ResidualActionWrapper, ResidualVecEnv, make_base_controller
 from agents.vec_env import MultiEnvSubprocVecEnv
 
-__all__ = ["env_kwargs", "make_env", "env_factory", "make_vec_env", "history_settings", "VECTOR_KINDS"]
+__all__ = ["env_kwargs", "evaluation_config", "make_env", "env_factory", "make_vec_env", "history_settings",
+           "VECTOR_KINDS", "CURRICULUM_RANGES"]
 
 VECTOR_KINDS = ("batched", "subprocess")
+
+# randomised quantities that shape training only (a start-state curriculum: episodes starting along the
+# reference), never the task an evaluation judges: an evaluation flies the whole path from its start
+CURRICULUM_RANGES = ("start_time",)
 
 # info entries that Monitor copies into each finished episode's record (info["episode"])
 MONITOR_INFO_KEYS = ("collisions",)
@@ -42,6 +47,15 @@ def env_kwargs(config: dict[str, Any], randomize: bool | None = None) -> dict[st
     if config["randomize"] if randomize is None else randomize:
         kwargs["randomize"] = {k: tuple(float(b) for b in v) for k, v in config["randomize_ranges"].items()}
     return kwargs
+
+
+def evaluation_config(config: dict[str, Any]) -> dict[str, Any]:
+    """``config`` for the evaluations during training: the curriculum's ranges (:data:`CURRICULUM_RANGES`)
+    left out, so that every evaluation flies the task from its start and returns compare across checkpoints."""
+    ranges = {k: v for k, v in config["randomize_ranges"].items() if k not in CURRICULUM_RANGES}
+    if len(ranges) == len(config["randomize_ranges"]):
+        return config
+    return {**config, "randomize_ranges": ranges, "randomize": bool(config["randomize"] and ranges)}
 
 
 def make_env(config: dict[str, Any], randomize: bool | None = None, monitor: bool = True) -> gym.Env:

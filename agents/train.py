@@ -236,12 +236,21 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     Raises :class:`TrainingInterrupted` on Ctrl-C, after saving a checkpoint to resume from.
     """
     import torch
-    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+    from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from agents.callbacks import CollisionLog, PeriodicCheckpoint, ProgressBar, SaveBestCheckpoint, TorchThreads, TrainingClock, policy_info
+    from agents.callbacks import (
+        CollisionLog,
+        PeriodicCheckpoint,
+        ProgressBar,
+        SameEpisodesEval,
+        SaveBestCheckpoint,
+        TorchThreads,
+        TrainingClock,
+        policy_info,
+    )
     from agents.checkpoints import load_model, read_json, save_checkpoint, write_model_card
-    from agents.envs import make_vec_env
+    from agents.envs import evaluation_config, make_vec_env
     from controllers.threads import choose_threads
 
     started = time.perf_counter()
@@ -288,15 +297,18 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                 warm = warm_start_from_controller(config, model, train_env, verbose=verbose)
 
         # the same wrappers as the training env (sync_envs_normalization walks both stacks); one env
-        # per evaluation episode (up to 32), so an evaluation flies its episodes side by side
+        # per evaluation episode (up to 32), so an evaluation flies its episodes side by side; the task from its
+        # start (no curriculum), the same episodes every time
         eval_envs = min(int(config["eval"]["episodes"]), 32)
-        eval_env = VecNormalize(make_vec_env(config, eval_envs, 0, vector=vector_kind(config)), training=False,
-                                norm_obs=norm["norm_obs"], norm_reward=False, clip_obs=float(norm["clip_obs"]))
+        eval_env = VecNormalize(make_vec_env(evaluation_config(config), eval_envs, 0, vector=vector_kind(config)),
+                                training=False, norm_obs=norm["norm_obs"], norm_reward=False,
+                                clip_obs=float(norm["clip_obs"]))
         eval_env.seed(int(config["eval"]["seed"]))
         best = SaveBestCheckpoint(out / "best", description, clock, checks)
-        evaluation = EvalCallback(eval_env, callback_on_new_best=best, n_eval_episodes=int(config["eval"]["episodes"]),
-                                  eval_freq=max(int(config["eval"]["freq"]) // config["n_envs"], 1),
-                                  log_path=str(out / "eval"), deterministic=True, verbose=verbose)
+        evaluation = SameEpisodesEval(eval_env, int(config["eval"]["seed"]), callback_on_new_best=best,
+                                      n_eval_episodes=int(config["eval"]["episodes"]),
+                                      eval_freq=max(int(config["eval"]["freq"]) // config["n_envs"], 1),
+                                      log_path=str(out / "eval"), deterministic=True, verbose=verbose)
         evaluation.best_mean_reward = best_so_far
         history_file = out / "eval" / "evaluations.npz"
         if resume and history_file.is_file():  # keep the earlier evaluations: EvalCallback rewrites the file
@@ -348,6 +360,12 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
             saved = periodic.save()  # model, statistics, step count and wall time: all --resume needs
             raise TrainingInterrupted(out, saved, int(model.num_timesteps)) from None
         ppo_time = time.perf_counter() - ppo_started
+        if 0 <= _last_evaluated(evaluation) < int(model.num_timesteps) and target_steps > start_steps:
+            # the steps after the last evaluation (the learning rate lowest there) were never judged: the final
+            # model is a candidate for best/ on the same episodes, kept only if it beats the best so far (a run
+            # that evaluated nothing keeps its final model as best/ unjudged, below)
+            _evaluate_as_best(model, train_env, evaluation, out / "best", policy_info(model, clock, description), checks,
+                              only_if_better=True)
         run_time = clock.this_run_s
         total_time = clock.total_s
         save_checkpoint(out, model, train_env, {**description, "num_timesteps": int(model.num_timesteps),
@@ -427,16 +445,25 @@ def warm_start_from_controller(config: dict[str, Any], model: Any, normalizer: A
             "controller_failures": int(getattr(controller, "failures", 0)), "cloning": cloning}
 
 
+def _last_evaluated(evaluation: Any) -> int:
+    """The env step of ``evaluation``'s (an ``EvalCallback``'s) last evaluation, -1 before the first."""
+    return int(evaluation.evaluations_timesteps[-1]) if evaluation.evaluations_timesteps else -1
+
+
 def _evaluate_as_best(model: Any, train_env: Any, evaluation: Any, folder: Path, info: dict[str, Any],
-                      checks: np.ndarray) -> float:
-    """Evaluate ``model`` as ``evaluation`` (an ``EvalCallback``) would, record it in its history and save it
-    as the best checkpoint so far; its mean return."""
+                      checks: np.ndarray, only_if_better: bool = False) -> float:
+    """Evaluate ``model`` as ``evaluation`` (an ``EvalCallback``) would, on its episodes, record it in its history
+    (and its file) and save it as the best checkpoint: always, or with ``only_if_better`` only if its mean
+    return beats the best so far; its mean return."""
     from stable_baselines3.common.evaluation import evaluate_policy
     from stable_baselines3.common.vec_env import sync_envs_normalization
 
+    from agents.callbacks import SameEpisodesEval
     from agents.checkpoints import save_checkpoint
 
     sync_envs_normalization(train_env, evaluation.eval_env)
+    if isinstance(evaluation, SameEpisodesEval):
+        evaluation.eval_env.seed(evaluation.episode_seed)
     returns, lengths = evaluate_policy(model, evaluation.eval_env, n_eval_episodes=evaluation.n_eval_episodes,
                                        deterministic=True, return_episode_rewards=True)
     assert isinstance(returns, list) and isinstance(lengths, list)  # per-episode lists with return_episode_rewards
@@ -444,8 +471,13 @@ def _evaluate_as_best(model: Any, train_env: Any, evaluation: Any, folder: Path,
     evaluation.evaluations_timesteps.append(int(model.num_timesteps))
     evaluation.evaluations_results.append([float(r) for r in returns])
     evaluation.evaluations_length.append([int(n) for n in lengths])
+    if evaluation.log_path is not None:  # as EvalCallback keeps its history file
+        np.savez(evaluation.log_path, timesteps=evaluation.evaluations_timesteps,
+                 results=evaluation.evaluations_results, ep_lengths=evaluation.evaluations_length)
+    better = mean > float(evaluation.best_mean_reward)
     evaluation.best_mean_reward = max(float(evaluation.best_mean_reward), mean)
-    save_checkpoint(folder, model, train_env, {**info, "eval_mean_return": mean}, checks)
+    if better or not only_if_better:
+        save_checkpoint(folder, model, train_env, {**info, "eval_mean_return": mean}, checks)
     return mean
 
 
