@@ -38,7 +38,7 @@ def test_the_typed_defaults_are_the_shared_defaults_a_file_overrides():
     ({"bogus": 1}, r"unknown key\(s\) \['bogus'\]; allowed: \['algo', "),
     ({"ppo": "fast"}, r"ppo must be a mapping, got 'fast'"),
     ({"ppo.gamma": 0.0}, r"ppo.gamma must be in \(0.0, 1.0\], got 0.0"),
-    ({"ppo.learning_rate_final": 1.0}, r"ppo.learning_rate_final must be in \[0.0, 0.0003\], got 1.0"),
+    ({"ppo.learning_rate_final": 1.0}, r"ppo.learning_rate_final must be in \[0.0, 0.0005\], got 1.0"),
     ({"policy.activation": "sigmoid"}, r"policy.activation must be one of \('tanh', 'relu', 'elu'\), got 'sigmoid'"),
     ({"policy.ortho_init": "yes"}, r"policy.ortho_init must be true or false, got 'yes'"),
     ({"normalize.clip_obs": -1}, r"normalize.clip_obs must be in \(0.0, inf\], got -1"),
