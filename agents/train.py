@@ -471,7 +471,8 @@ def _evaluate_as_best(model: Any, train_env: Any, evaluation: Any, folder: Path,
     evaluation.evaluations_timesteps.append(int(model.num_timesteps))
     evaluation.evaluations_results.append([float(r) for r in returns])
     evaluation.evaluations_length.append([int(n) for n in lengths])
-    if evaluation.log_path is not None:  # as EvalCallback keeps its history file
+    if evaluation.log_path is not None:  # as EvalCallback keeps its history file (it makes the folder only once learning starts)
+        Path(evaluation.log_path).parent.mkdir(parents=True, exist_ok=True)
         np.savez(evaluation.log_path, timesteps=evaluation.evaluations_timesteps,
                  results=evaluation.evaluations_results, ep_lengths=evaluation.evaluations_length)
     better = mean > float(evaluation.best_mean_reward)
