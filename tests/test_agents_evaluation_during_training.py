@@ -58,7 +58,7 @@ def _evaluations(folder, callback_type, **kwargs) -> list[list[float]]:
     eval_env = VecNormalize(make_vec_env(config, 3, vector="batched"), training=False, norm_reward=False)
     eval_env.seed(11)
     model = LeanPPO("MlpPolicy", train_env, n_steps=64, batch_size=64, seed=0, device="cpu")
-    model.set_logger(configure(None, []))
+    model.set_logger(configure(str(folder), []))  # a folder of its own: None makes one in /tmp
     callback = callback_type(eval_env, n_eval_episodes=3, eval_freq=1, deterministic=True, verbose=0,
                              log_path=str(folder), **kwargs)
     callback.init_callback(model)
