@@ -48,7 +48,9 @@ def _training_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a configuration entry, e.g. --set ppo.n_steps=128 (repeatable)")
     parser.add_argument("--randomize", action=argparse.BooleanOptionalAction, default=None,
-                        help="domain randomisation of k_s, d_thr, stand-off and mass (ranges from the config)")
+                        help="draw the config's randomize_ranges per episode: the world (k_s, d_thr, stand-off, mass, ...) "
+                             "or, for the sweep, facade and pier, the start time along the path (a curriculum; on in "
+                             "their configs)")
     parser.add_argument("--residual", choices=["none", "pid", "scmpc"],
                         help="learn a correction on top of this base controller (default: config, none)")
     parser.add_argument("--warm-start", choices=["none", "pid", "scmpc"],
