@@ -71,16 +71,20 @@ class TrainingInterrupted(KeyboardInterrupt):
         self.run_dir, self.checkpoint, self.num_timesteps = run_dir, checkpoint, num_timesteps
 
 
-def planned_timesteps(config: dict[str, Any], start: int = 0) -> int:
+def planned_timesteps(config: dict[str, Any], start: int = 0, unfinished: bool = False) -> int:
     """The step count a run reaches: ``start`` plus the most whole PPO rollouts
     (``n_envs * ppo.n_steps`` env steps each) that fit in ``config["timesteps"]``.
 
-    ``ValueError`` if not even one rollout fits.
+    ``ValueError`` if not even one rollout fits, unless the run is ``unfinished`` (resumed, its card not
+    written: stopped after its last rollout, while its final model was judged or its card made) and
+    ``config["timesteps"]`` covers ``start``: then no step is left and the run only finishes.
     """
     if config.get("algo", "ppo") == "dagger":  # no PPO steps: the teacher's labels are the training
         return int(start)
     rollout = int(config["n_envs"]) * int(config["ppo"]["n_steps"])
     rollouts = (int(config["timesteps"]) - int(start)) // rollout
+    if unfinished and 0 < int(start) <= int(config["timesteps"]) and rollouts < 1:
+        return int(start)
     if rollouts < 1:
         raise ValueError(f"--timesteps {config['timesteps']} leaves no room for one PPO rollout of {rollout} env steps "
                          f"(n_envs {config['n_envs']} x ppo.n_steps {config['ppo']['n_steps']})"
@@ -271,7 +275,8 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         previous_wall = float(info.get("wall_time_s", 0.0))
         if (out / "best" / "policy.json").is_file():
             best_so_far = float(read_json(out / "best" / "policy.json").get("eval_mean_return", -np.inf))
-    target_steps = planned_timesteps(config, start_steps)  # ValueError before any worker starts
+    # ValueError before any worker starts
+    target_steps = planned_timesteps(config, start_steps, unfinished=resume and not (out / "model_card.json").is_file())
     if checks is None:
         checks = check_observations(config)  # builds the env once: bad env settings fail here
     if not resume:
@@ -354,18 +359,19 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
                 with _unchecked_distributions():
                     model.learn(total_timesteps=target_steps - start_steps, callback=CallbackList(callbacks),
                                 reset_num_timesteps=not resume, tb_log_name="ppo", progress_bar=False)
+            if 0 <= _last_evaluated(evaluation) < int(model.num_timesteps):
+                # the steps after the last evaluation (the learning rate lowest there) were never judged: the final
+                # model is a candidate for best/ on the same episodes, kept only if it beats the best so far (a run
+                # that evaluated nothing keeps its final model as best/ unjudged, below); stopped here, the resumed
+                # run judges it
+                _evaluate_as_best(model, train_env, evaluation, out / "best", policy_info(model, clock, description),
+                                  checks, only_if_better=True)
         except (KeyboardInterrupt, Exception) as exc:
             if not interrupts.is_interrupt(exc):  # a real error; one raised after Ctrl-C is the interrupt's
                 raise
             saved = periodic.save()  # model, statistics, step count and wall time: all --resume needs
             raise TrainingInterrupted(out, saved, int(model.num_timesteps)) from None
         ppo_time = time.perf_counter() - ppo_started
-        if 0 <= _last_evaluated(evaluation) < int(model.num_timesteps) and target_steps > start_steps:
-            # the steps after the last evaluation (the learning rate lowest there) were never judged: the final
-            # model is a candidate for best/ on the same episodes, kept only if it beats the best so far (a run
-            # that evaluated nothing keeps its final model as best/ unjudged, below)
-            _evaluate_as_best(model, train_env, evaluation, out / "best", policy_info(model, clock, description), checks,
-                              only_if_better=True)
         run_time = clock.this_run_s
         total_time = clock.total_s
         save_checkpoint(out, model, train_env, {**description, "num_timesteps": int(model.num_timesteps),

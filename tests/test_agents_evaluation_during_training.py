@@ -91,3 +91,38 @@ def test_the_final_model_is_judged_when_the_run_ends_between_evaluations(tmp_pat
     best = max(curve, key=lambda row: row[1])
     assert saved["eval_mean_return"] == pytest.approx(best[1], abs=0.01)
     assert saved["num_timesteps"] == best[0]  # best/ is whichever of the two scored higher
+
+
+def test_ctrl_c_while_the_final_model_is_judged_resumes_to_the_same_best(tmp_path, monkeypatch):
+    import agents.train
+    from agents.train import TrainingInterrupted
+
+    def tiny() -> dict:
+        config = default_config("WallHover")
+        config.update(timesteps=1536, n_envs=2, n_workers=1, checkpoint_freq=0, checkpoint_minutes=0.0, seed=5)
+        config["ppo"].update(n_steps=256, batch_size=256, n_epochs=1)
+        config["eval"].update(freq=1024, episodes=1)
+        config["card_eval"]["episodes"] = 1
+        return config
+
+    whole = train(tiny(), tmp_path / "whole", progress_bar=False, verbose=0)
+
+    judge = agents.train._evaluate_as_best
+
+    def ctrl_c_at_the_final_judgement(*args, **kwargs):
+        if kwargs.get("only_if_better"):
+            raise KeyboardInterrupt
+        return judge(*args, **kwargs)
+
+    monkeypatch.setattr(agents.train, "_evaluate_as_best", ctrl_c_at_the_final_judgement)
+    with pytest.raises(TrainingInterrupted) as stopped:
+        train(tiny(), tmp_path / "stopped", progress_bar=False, verbose=0)
+    assert stopped.value.num_timesteps == 1536  # saved with every step trained, the final model not yet judged
+    monkeypatch.setattr(agents.train, "_evaluate_as_best", judge)
+    resumed = train(tiny(), tmp_path / "stopped", resume=True, progress_bar=False, verbose=0)
+    assert resumed.card["training"]["timesteps_this_run"] == 0
+    assert [row[0] for row in resumed.card["training"]["eval_curve"]] == [1024, 1536]  # judged by the resumed run
+    assert resumed.card["training"]["eval_curve"] == whole.card["training"]["eval_curve"]
+    best = [json.loads((run / "best" / "policy.json").read_text()) for run in (tmp_path / "whole", tmp_path / "stopped")]
+    assert best[0]["num_timesteps"] == best[1]["num_timesteps"]
+    assert best[0]["eval_mean_return"] == pytest.approx(best[1]["eval_mean_return"], abs=1e-6)

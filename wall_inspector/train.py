@@ -181,7 +181,8 @@ def _resumed_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
     from agents.checkpoints import read_json
 
     start = _latest_checkpoint(run_dir)
-    planned_timesteps(config, int(read_json(start / "policy.json").get("num_timesteps", 0)))
+    planned_timesteps(config, int(read_json(start / "policy.json").get("num_timesteps", 0)),
+                      unfinished=not (run_dir / "model_card.json").is_file())
     return config, run_dir
 
 
