@@ -76,13 +76,18 @@ def test_every_evaluation_flies_the_same_episodes(tmp_path):
     assert not np.allclose(drawn_on[0], drawn_on[1], rtol=0, atol=1e-6)
 
 
-def test_the_final_model_is_judged_when_the_run_ends_between_evaluations(tmp_path):
+def _ends_between_evaluations() -> dict:
+    """A hover run of 1,536 steps (3 rollouts of 2 x 256) evaluated every 1,024 steps."""
     config = default_config("WallHover")
-    config.update(timesteps=1536, n_envs=2, n_workers=1, checkpoint_freq=0, checkpoint_minutes=0.0)
+    config.update(timesteps=1536, n_envs=2, n_workers=1, checkpoint_freq=0, checkpoint_minutes=0.0, seed=5)
     config["ppo"].update(n_steps=256, batch_size=256, n_epochs=1)
     config["eval"].update(freq=1024, episodes=1)
     config["card_eval"]["episodes"] = 1
-    trained = train(config, tmp_path / "hover", progress_bar=False, verbose=0)
+    return config
+
+
+def test_the_final_model_is_judged_when_the_run_ends_between_evaluations(tmp_path):
+    trained = train(_ends_between_evaluations(), tmp_path / "hover", progress_bar=False, verbose=0)
     curve = trained.card["training"]["eval_curve"]
     assert [row[0] for row in curve] == [1024, 1536]  # the evaluation of 1024 steps, then the final model's
     history = np.load(tmp_path / "hover" / "eval" / "evaluations.npz")
@@ -97,15 +102,7 @@ def test_ctrl_c_while_the_final_model_is_judged_resumes_to_the_same_best(tmp_pat
     import agents.train
     from agents.train import TrainingInterrupted
 
-    def tiny() -> dict:
-        config = default_config("WallHover")
-        config.update(timesteps=1536, n_envs=2, n_workers=1, checkpoint_freq=0, checkpoint_minutes=0.0, seed=5)
-        config["ppo"].update(n_steps=256, batch_size=256, n_epochs=1)
-        config["eval"].update(freq=1024, episodes=1)
-        config["card_eval"]["episodes"] = 1
-        return config
-
-    whole = train(tiny(), tmp_path / "whole", progress_bar=False, verbose=0)
+    whole = train(_ends_between_evaluations(), tmp_path / "whole", progress_bar=False, verbose=0)
 
     judge = agents.train._evaluate_as_best
 
@@ -116,10 +113,10 @@ def test_ctrl_c_while_the_final_model_is_judged_resumes_to_the_same_best(tmp_pat
 
     monkeypatch.setattr(agents.train, "_evaluate_as_best", ctrl_c_at_the_final_judgement)
     with pytest.raises(TrainingInterrupted) as stopped:
-        train(tiny(), tmp_path / "stopped", progress_bar=False, verbose=0)
+        train(_ends_between_evaluations(), tmp_path / "stopped", progress_bar=False, verbose=0)
     assert stopped.value.num_timesteps == 1536  # saved with every step trained, the final model not yet judged
     monkeypatch.setattr(agents.train, "_evaluate_as_best", judge)
-    resumed = train(tiny(), tmp_path / "stopped", resume=True, progress_bar=False, verbose=0)
+    resumed = train(_ends_between_evaluations(), tmp_path / "stopped", resume=True, progress_bar=False, verbose=0)
     assert resumed.card["training"]["timesteps_this_run"] == 0
     assert [row[0] for row in resumed.card["training"]["eval_curve"]] == [1024, 1536]  # judged by the resumed run
     assert resumed.card["training"]["eval_curve"] == whole.card["training"]["eval_curve"]
