@@ -119,9 +119,13 @@ class SameEpisodesEval(EvalCallback):
         super().__init__(eval_env, **kwargs)
         self.episode_seed = int(episode_seed)
 
+    def rewind(self) -> None:
+        """Seed the env so that its next evaluation flies the episodes every evaluation flies."""
+        self.eval_env.seed(self.episode_seed)
+
     def _on_step(self) -> bool:
         if self.eval_freq > 0 and self.n_calls % self.eval_freq == 0:
-            self.eval_env.seed(self.episode_seed)
+            self.rewind()
         return super()._on_step()
 
 

@@ -41,7 +41,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -51,11 +51,15 @@ from agents.config import (
 )
 from wall_env import interrupts
 
+if TYPE_CHECKING:  # imported where used: agents.callbacks loads Stable-Baselines3
+    from agents.callbacks import SameEpisodesEval
+
 __all__ = [
     "TrainingInterrupted",
     "TrainingRun",
     "check_observations",
     "planned_timesteps",
+    "card_written",
     "policy_description",
     "train",
 ]
@@ -69,6 +73,11 @@ class TrainingInterrupted(KeyboardInterrupt):
     def __init__(self, run_dir: Path, checkpoint: Path, num_timesteps: int):
         super().__init__(f"interrupted at {num_timesteps} env steps; saved in {checkpoint}")
         self.run_dir, self.checkpoint, self.num_timesteps = run_dir, checkpoint, num_timesteps
+
+
+def card_written(run_dir: Path) -> bool:
+    """Whether the run in ``run_dir`` finished: its model card is the last thing a run writes."""
+    return (Path(run_dir) / "model_card.json").is_file()
 
 
 def planned_timesteps(config: dict[str, Any], start: int = 0, unfinished: bool = False) -> int:
@@ -276,7 +285,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         if (out / "best" / "policy.json").is_file():
             best_so_far = float(read_json(out / "best" / "policy.json").get("eval_mean_return", -np.inf))
     # ValueError before any worker starts
-    target_steps = planned_timesteps(config, start_steps, unfinished=resume and not (out / "model_card.json").is_file())
+    target_steps = planned_timesteps(config, start_steps, unfinished=resume and not card_written(out))
     if checks is None:
         checks = check_observations(config)  # builds the env once: bad env settings fail here
     if not resume:
@@ -308,7 +317,6 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         eval_env = VecNormalize(make_vec_env(evaluation_config(config), eval_envs, 0, vector=vector_kind(config)),
                                 training=False, norm_obs=norm["norm_obs"], norm_reward=False,
                                 clip_obs=float(norm["clip_obs"]))
-        eval_env.seed(int(config["eval"]["seed"]))
         best = SaveBestCheckpoint(out / "best", description, clock, checks)
         evaluation = SameEpisodesEval(eval_env, int(config["eval"]["seed"]), callback_on_new_best=best,
                                       n_eval_episodes=int(config["eval"]["episodes"]),
@@ -334,14 +342,13 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
 
             def judge() -> float:  # the mean return of the evaluation episodes, the same ones for every iteration
                 sync_envs_normalization(train_env, eval_env)
-                eval_env.seed(int(config["eval"]["seed"]))
+                evaluation.rewind()
                 returns, _ = evaluate_policy(model, eval_env, n_eval_episodes=int(config["eval"]["episodes"]),
                                              deterministic=True, return_episode_rewards=True)
                 return float(np.mean(returns))
 
             teacher = distil(config, model, train_env, verbose=verbose, judge=judge)
         if teacher is not None:  # the distilled policy is the result (no PPO steps follow); judged on the same episodes
-            eval_env.seed(int(config["eval"]["seed"]))
             teacher["eval_mean_return"] = _evaluate_as_best(model, train_env, evaluation, out / "best",
                                                             policy_info(model, clock, description), checks)
         ppo_started = time.perf_counter()
@@ -456,7 +463,7 @@ def _last_evaluated(evaluation: Any) -> int:
     return int(evaluation.evaluations_timesteps[-1]) if evaluation.evaluations_timesteps else -1
 
 
-def _evaluate_as_best(model: Any, train_env: Any, evaluation: Any, folder: Path, info: dict[str, Any],
+def _evaluate_as_best(model: Any, train_env: Any, evaluation: SameEpisodesEval, folder: Path, info: dict[str, Any],
                       checks: np.ndarray, only_if_better: bool = False) -> float:
     """Evaluate ``model`` as ``evaluation`` (an ``EvalCallback``) would, on its episodes, record it in its history
     (and its file) and save it as the best checkpoint: always, or with ``only_if_better`` only if its mean
@@ -464,12 +471,10 @@ def _evaluate_as_best(model: Any, train_env: Any, evaluation: Any, folder: Path,
     from stable_baselines3.common.evaluation import evaluate_policy
     from stable_baselines3.common.vec_env import sync_envs_normalization
 
-    from agents.callbacks import SameEpisodesEval
     from agents.checkpoints import save_checkpoint
 
     sync_envs_normalization(train_env, evaluation.eval_env)
-    if isinstance(evaluation, SameEpisodesEval):
-        evaluation.eval_env.seed(evaluation.episode_seed)
+    evaluation.rewind()
     returns, lengths = evaluate_policy(model, evaluation.eval_env, n_eval_episodes=evaluation.n_eval_episodes,
                                        deterministic=True, return_episode_rewards=True)
     assert isinstance(returns, list) and isinstance(lengths, list)  # per-episode lists with return_episode_rewards

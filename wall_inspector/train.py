@@ -26,7 +26,7 @@ from typing import Any
 
 from agents import train as agents_train
 from agents.config import apply_overrides, default_config, load_config, task_env_id, validate_config
-from agents.train import TrainingInterrupted, _latest_checkpoint, check_observations, planned_timesteps, ship, train
+from agents.train import TrainingInterrupted, _latest_checkpoint, card_written, check_observations, planned_timesteps, ship, train
 from wall_env.validation import check_output_folder
 
 
@@ -182,7 +182,7 @@ def _resumed_run(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
 
     start = _latest_checkpoint(run_dir)
     planned_timesteps(config, int(read_json(start / "policy.json").get("num_timesteps", 0)),
-                      unfinished=not (run_dir / "model_card.json").is_file())
+                      unfinished=not card_written(run_dir))
     return config, run_dir
 
 
