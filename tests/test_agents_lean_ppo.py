@@ -97,3 +97,31 @@ def test_adaptive_kl_steps_the_learning_rate_by_the_kl_of_each_minibatch(target,
     assert model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(3e-4 * factors)
     with pytest.raises(ValueError, match=r"adaptive_kl must be None or a KL in \(0, 1\), got 2"):
         _model(LeanPPO, adaptive_kl=2)
+
+
+def test_the_minibatch_tanh_has_tanhs_values_and_gradient():
+    from agents.lean_ppo import _Tanh
+
+    x = torch.randn(256, 64, dtype=torch.float32, generator=torch.Generator().manual_seed(0)) * 3.0
+    weights = torch.randn(256, 64, generator=torch.Generator().manual_seed(1))
+    fast, exact = x.clone().requires_grad_(True), x.clone().requires_grad_(True)
+    (_Tanh.apply(fast) * weights).sum().backward()
+    (torch.tanh(exact) * weights).sum().backward()
+    np.testing.assert_allclose(_Tanh.apply(x).numpy(), torch.tanh(x).numpy(), rtol=0, atol=3e-7)
+    np.testing.assert_allclose(fast.grad.numpy(), exact.grad.numpy(), rtol=0, atol=1e-6)
+    assert float(exact.grad.abs().max()) > 0.5  # a gradient that the comparison can miss
+
+
+@pytest.mark.parametrize("deterministic", [True, False])
+def test_predict_gives_sb3s_actions(deterministic):
+    model = _model(LeanPPO)
+    obs = np.random.default_rng(2).normal(size=(200, 48)).astype(np.float32)
+    ours = model.predict(obs, deterministic=deterministic)[0]
+    theirs = PPO.predict(model, obs, deterministic=True)[0]  # SB3's own path: the mean, clipped
+    assert ours.shape == (200, 4) and model.predict(obs[0], deterministic=deterministic)[0].shape == (4,)
+    assert np.all(np.abs(ours) <= 1.0)
+    if deterministic:
+        np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-7)
+        np.testing.assert_allclose(model.predict(obs[0], deterministic=True)[0], theirs[0], rtol=0, atol=1e-7)
+    else:  # drawn around the mean with the policy's std, exp(-1) = 0.37
+        assert np.std(ours - theirs) == pytest.approx(np.exp(-1.0), rel=0.1)
