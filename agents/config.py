@@ -152,7 +152,8 @@ class PPOSettings:
 class PolicySettings:
     """The network (``policy:``)."""
 
-    net_arch: list[int] = field(default_factory=lambda: [64, 64])  # hidden layers of both the actor and the critic
+    net_arch: list[int] = field(default_factory=lambda: [64, 64])  # hidden layers of the actor (and of the critic)
+    critic_arch: list[int] | None = None  # hidden layers of the critic; None: net_arch's
     activation: str = "tanh"  # one of tanh, relu, elu
     log_std_init: float = -1.0  # initial exploration std exp(-1) = 0.37 of the action range
     ortho_init: bool = True
@@ -162,6 +163,10 @@ class PolicySettings:
         if not (isinstance(self.net_arch, list)
                 and all(isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in self.net_arch)):
             raise ValueError(f"policy.net_arch must be a list of positive layer widths, got {self.net_arch!r}")
+        if self.critic_arch is not None and not (
+                isinstance(self.critic_arch, list)
+                and all(isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in self.critic_arch)):
+            raise ValueError(f"policy.critic_arch must be null or a list of positive layer widths, got {self.critic_arch!r}")
         if not isinstance(self.activation, str) or self.activation not in _ACTIVATIONS:
             raise ValueError(f"policy.activation must be one of {_ACTIVATIONS}, got {self.activation!r}")
         _flag("policy.ortho_init", self.ortho_init)

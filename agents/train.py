@@ -181,9 +181,10 @@ def make_ppo(config: dict[str, Any], env: Any, tb_dir: Path | None, verbose: int
 
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU}[config["policy"]["activation"]]
     arch = list(config["policy"]["net_arch"])
+    critic = list(config["policy"]["critic_arch"] or arch)
     # SB3's Adam (eps 1e-5) with PyTorch's fused CPU kernel: one call updates every tensor (the same
     # algorithm; a gradient step of 1024 samples measured 3.3 ms against 4.5 ms with the default loop)
-    policy_kwargs = {"net_arch": {"pi": arch, "vf": arch}, "activation_fn": activation,
+    policy_kwargs = {"net_arch": {"pi": arch, "vf": critic}, "activation_fn": activation,
                      "log_std_init": float(config["policy"]["log_std_init"]), "ortho_init": bool(config["policy"]["ortho_init"]),
                      "optimizer_kwargs": {"eps": 1e-5, "fused": True}}
     ppo = dict(config["ppo"])
@@ -503,13 +504,16 @@ def model_card(config: dict[str, Any], checkpoint: Path, *, command: str | None,
     seeds = range(int(config["card_eval"]["seed"]), int(config["card_eval"]["seed"]) + int(config["card_eval"]["episodes"]))
     metrics = evaluate_agent(policy_factory(checkpoint), config["env_id"], kwargs, seeds)
     info = json.loads((checkpoint / "policy.json").read_text())
+    policy = config["policy"]
+    mlp = "x".join(map(str, policy["net_arch"])) + (
+        f", critic {'x'.join(map(str, policy['critic_arch']))}" if policy["critic_arch"] else "")
     return {
         "env_id": config["env_id"],
         "summary": (f"{config['teacher']['controller'].upper().replace('SCMPC', 'SC-MPC')} distilled DAgger-style into "
-                    "an MLP " + "x".join(map(str, config["policy"]["net_arch"])) + " (saved as a Stable-Baselines3 PPO "
+                    f"an MLP {mlp} (saved as a Stable-Baselines3 PPO "
                     "model; it learned from a teacher, not alone), flying the task directly."
                     if config.get("algo") == "dagger" else
-                    "PPO (Stable-Baselines3, MLP " + "x".join(map(str, config["policy"]["net_arch"])) + ") "
+                    f"PPO (Stable-Baselines3, MLP {mlp}) "
                     + (f"learning a residual correction on top of {config['residual']}" if config["residual"]
                        else "flying the task directly (collective thrust and body rates)")
                     + (f", warm-started by behaviour cloning of {config['warm_start']['controller']}"

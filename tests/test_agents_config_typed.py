@@ -65,3 +65,17 @@ def test_overrides_reach_the_typed_fields():
     config = apply_overrides(default_config("WallSweep"), ["ppo.n_epochs=2", "policy.net_arch=[32, 16]", "seed=4"])
     typed = TrainingConfig.from_dict(config)
     assert (typed.ppo.n_epochs, typed.policy.net_arch, typed.seed) == (2, [32, 16], 4)
+
+
+def test_the_critic_can_be_wider_than_the_actor():
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from agents.envs import make_vec_env
+    from agents.train import make_ppo
+
+    config = apply_overrides(default_config("WallSweep"), ["policy.critic_arch=[128, 128]", "n_envs=2"])
+    policy = make_ppo(config, VecNormalize(make_vec_env(config, 2, vector="batched")), None).policy
+    assert [layer.out_features for layer in policy.mlp_extractor.policy_net if hasattr(layer, "out_features")] == [64, 64]
+    assert [layer.out_features for layer in policy.mlp_extractor.value_net if hasattr(layer, "out_features")] == [128, 128]
+    with pytest.raises(ValueError, match="policy.critic_arch"):
+        apply_overrides(config, ["policy.critic_arch=[0]"])
