@@ -342,6 +342,9 @@ class TrainingConfig:
     # below ROLLOUT_ROWS_PER_THREAD rows per thread runs faster on one thread than split over two; "auto": that
     # rule within the free cores
     rollout_torch_threads: int | str = "auto"
+    # rollouts in a second process, flown while the learner updates on the one before (agents.rollout_worker: one
+    # update behind; an iteration costs the longer of rollout and update instead of their sum)
+    rollout_worker: bool = False
     ppo: PPOSettings = field(default_factory=PPOSettings)
     policy: PolicySettings = field(default_factory=PolicySettings)
     normalize: NormalizeSettings = field(default_factory=NormalizeSettings)
@@ -397,6 +400,7 @@ class TrainingConfig:
         if isinstance(self.checkpoint_freq, bool) or not isinstance(self.checkpoint_freq, int) or self.checkpoint_freq < 0:
             raise ValueError(f"checkpoint_freq must be a whole number of env steps >= 0, got {self.checkpoint_freq!r}")
         _number("checkpoint_minutes", self.checkpoint_minutes, 0.0)
+        _flag("rollout_worker", self.rollout_worker)
         if self.n_workers > self.n_envs:
             raise ValueError(f"n_workers ({self.n_workers}) must not exceed n_envs ({self.n_envs})")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int):

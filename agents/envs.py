@@ -6,7 +6,7 @@ keywords: the task's ``env_kwargs`` plus, when ``randomize`` is on, the env's ow
 per episode by the environment). :func:`make_env` builds one environment, wrapped
 for a residual agent when the configuration names a base controller, and in a
 ``Monitor`` so Stable-Baselines3 logs episode returns and lengths.
-:func:`make_vec_env` builds the training env: the batched env
+:func:`make_vec_env` builds the vector env (:func:`make_training_env`: under the training ``VecNormalize``): the batched env
 (:class:`~agents.batched_vec_env.BatchedVecEnv` under ``VecMonitor``, all envs stepped by
 one compiled call in this process) or a :class:`~agents.vec_env.MultiEnvSubprocVecEnv`
 (``vector="subprocess"``); with ``n_workers=0`` a ``DummyVecEnv`` (evaluation, one
@@ -21,15 +21,15 @@ from typing import Any
 
 import gymnasium as gym
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, VecNormalize
 
 import wall_env  # noqa: F401  (registers the WallInspector tasks)
 from agents.config import base_controller_kwargs
 from agents.residual import ResidualActionWrapper, ResidualVecEnv, make_base_controller
 from agents.vec_env import MultiEnvSubprocVecEnv
 
-__all__ = ["env_kwargs", "evaluation_config", "make_env", "env_factory", "make_vec_env", "history_settings",
-           "VECTOR_KINDS", "CURRICULUM_RANGES"]
+__all__ = ["env_kwargs", "evaluation_config", "make_env", "env_factory", "make_vec_env", "make_training_env",
+           "history_settings", "vector_kind", "VECTOR_KINDS", "CURRICULUM_RANGES"]
 
 VECTOR_KINDS = ("batched", "subprocess")
 
@@ -114,6 +114,21 @@ def make_vec_env(config: dict[str, Any], n_envs: int, n_workers: int = 0, random
     if n_workers <= 0:
         return _remembering(DummyVecEnv(fns), config)
     return _remembering(MultiEnvSubprocVecEnv(fns, n_workers=n_workers), config)
+
+
+def vector_kind(config: dict[str, Any]) -> str:
+    """The vector env a run uses: the configured one (residual agents too: on the batched env
+    their base controller predicts for the whole batch in one call)."""
+    return config.get("vector", "batched")
+
+
+def make_training_env(config: dict[str, Any]) -> VecNormalize:
+    """The run's training env: ``n_envs`` envs of the configured vector kind under ``VecNormalize`` with the
+    configured normalisation (the learner's, and a :class:`~agents.rollout_worker.RolloutWorker`'s alike)."""
+    norm = config["normalize"]
+    venv = make_vec_env(config, config["n_envs"], config["n_workers"], vector=vector_kind(config))
+    return VecNormalize(venv, norm_obs=norm["norm_obs"], norm_reward=norm["norm_reward"], clip_obs=float(norm["clip_obs"]),
+                        clip_reward=float(norm["clip_reward"]), gamma=float(config["ppo"]["gamma"]))
 
 
 def _remembering(venv: VecEnv, config: dict[str, Any]) -> VecEnv:

@@ -15,6 +15,9 @@
   ``optimizer_kwargs``), and the statistics that SB3 logs per minibatch (clip fraction, KL) kept
   as tensors and read once per update instead of with an ``.item()`` per minibatch.
 
+With a :class:`~agents.rollout_worker.RolloutWorker` in ``rollout_worker`` (set by :func:`agents.train.train`),
+the rollouts are flown in that process while the updates run here, one update behind (see that module).
+
 The losses are SB3's: clipped surrogate with per-minibatch advantage normalisation, value loss
 (optionally clipped), entropy bonus, ``max_grad_norm``, ``target_kl`` early stopping; for a
 diagonal Gaussian policy (``MlpPolicy`` on a ``Box`` action space without gSDE, which is what
@@ -69,7 +72,12 @@ class LeanPPO(PPO):
             raise ValueError(f"adaptive_kl must be None or a KL in (0, 1), got {adaptive_kl!r}")
         self.adaptive_kl = None if adaptive_kl is None else float(adaptive_kl)
         self.adaptive_lr: float | None = None
+        # set by the caller (agents.train): rollouts flown in that process, beside the updates (agents.rollout_worker)
+        self.rollout_worker: Any = None
         super().__init__(*args, **kwargs)
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "rollout_worker"]
 
     def _setup_model(self) -> None:
         super()._setup_model()
@@ -158,6 +166,8 @@ class LeanPPO(PPO):
         return (actions[0] if observation.ndim == 1 else actions), state
 
     def collect_rollouts(self, env: Any, callback: Any, rollout_buffer: Any, n_rollout_steps: int) -> bool:
+        if self.rollout_worker is not None:
+            return self._collect_from_worker(env, callback, rollout_buffer, n_rollout_steps)
         assert self._last_obs is not None, "no previous observation was provided"
         policy = self.policy
         acting = self._networks(grad=False)
@@ -199,6 +209,35 @@ class LeanPPO(PPO):
             values = policy.predict_values(torch.as_tensor(new_obs, dtype=torch.float32))
         rollout_buffer.compute_returns_and_advantage(last_values=values, dones=dones)
         callback.update_locals(locals())
+        callback.on_rollout_end()
+        return True
+
+    def _collect_from_worker(self, env: Any, callback: Any, rollout_buffer: Any, n_rollout_steps: int) -> bool:
+        """The rollout the worker flew (with the policy from before the last update), its next one started with the
+        current policy; the finished one copied into ``rollout_buffer`` and replayed to the callbacks step by step."""
+        worker = self.rollout_worker
+        if worker.n_steps != n_rollout_steps:
+            raise ValueError(f"the rollout worker flies {worker.n_steps} steps per env, the learner asks for {n_rollout_steps}")
+        callback.on_rollout_start()
+        normalizer = self.get_vec_normalize_env()
+        if not worker.flying:  # the first rollout: the current policy, with the learner's statistics (a resumed run's)
+            worker.fly(self.policy, *((normalizer.obs_rms, normalizer.ret_rms) if normalizer is not None else ()))
+        rollout = worker.collect()
+        worker.fly(self.policy)  # the next rollout flies while the learner updates on this one
+        if normalizer is not None:
+            normalizer.obs_rms, normalizer.ret_rms = rollout.obs_rms, rollout.ret_rms
+        rollout_buffer.reset()
+        for name, array in rollout.arrays.items():
+            getattr(rollout_buffer, name)[...] = array
+        rollout_buffer.pos, rollout_buffer.full = rollout_buffer.buffer_size, True
+        for t in range(n_rollout_steps):
+            infos, dones = rollout.infos_of_step(t), rollout.dones[t]
+            self.num_timesteps += env.num_envs
+            callback.update_locals({"infos": infos, "dones": dones})
+            if not callback.on_step():
+                return False
+            self._update_info_buffer(infos, dones)
+        callback.update_locals({"rollout_buffer": rollout_buffer})
         callback.on_rollout_end()
         return True
 

@@ -6,6 +6,12 @@ itself when it counts it (:class:`~agents.batched_vec_env.BatchedVecEnv` does, a
 :class:`~agents.residual.ResidualVecEnv` adds its base controller's time); the
 remainder of the training time is the learner's updates (and callbacks such as
 evaluations). ``split()`` gives seconds and shares for the model card.
+
+With a :class:`~agents.rollout_worker.RolloutWorker` (rollouts in a second process, beside the updates) the
+env steps and the rest of the rollouts are the worker's time, which overlaps the learner's; the split then
+adds ``waiting_for_rollouts_s`` (the learner idle until a rollout arrived), and the learner's own time
+(updates, replaying the rollouts to the callbacks, evaluations) is the rest. The shares are of the
+training time each, and add up to more than 1 by the overlap.
 """
 
 from __future__ import annotations
@@ -15,10 +21,10 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
-__all__ = ["TimeSplit"]
+__all__ = ["TimeSplit", "counting_env"]
 
 
-def _counting_env(env: Any) -> Any:
+def counting_env(env: Any) -> Any:
     """The outermost env of a vector-env wrapper chain (``.venv`` links) that keeps ``step_time_s``
     itself (SB3's wrappers forward attribute lookups, but refuse names found on two levels)."""
     while env is not None:
@@ -33,17 +39,19 @@ class TimeSplit(BaseCallback):
 
     def __init__(self, env: Any = None):
         super().__init__()
-        self.env = _counting_env(env)  # the outermost env of the wrapper chain that counts its step time
+        self.env = counting_env(env)  # the outermost env of the wrapper chain that counts its step time
         self.rollout_s = 0.0
         self._training_start = 0.0
         self._rollout_start = 0.0
         self.total_s = 0.0
         self._env_time_at_start = 0.0
+        self.worker: Any = None
 
     def _env_time(self) -> float:
         return float(getattr(self.env, "step_time_s", 0.0)) if self.env is not None else 0.0
 
     def _on_training_start(self) -> None:
+        self.worker = getattr(self.model, "rollout_worker", None)  # its figures are read after it has been closed
         self._training_start = time.perf_counter()
         self._env_time_at_start = self._env_time()
 
@@ -61,11 +69,17 @@ class TimeSplit(BaseCallback):
 
     def split(self) -> dict[str, float]:
         """Seconds and shares of the training time: env steps, the rest of the rollouts (policy
-        inference, buffers, wrappers), and updates plus callbacks."""
+        inference, buffers, wrappers), and updates plus callbacks (module docstring)."""
         total = self.total_s or (time.perf_counter() - self._training_start)
-        env_s = self._env_time() - self._env_time_at_start
-        parts = {"env_step_s": env_s, "rollout_other_s": max(self.rollout_s - env_s, 0.0),
-                 "update_and_callbacks_s": max(total - self.rollout_s, 0.0)}
+        worker = self.worker
+        if worker is not None:
+            parts = {"env_step_s": worker.env_step_s, "rollout_other_s": max(worker.fly_s - worker.env_step_s, 0.0),
+                     "waiting_for_rollouts_s": worker.waited_s,
+                     "update_and_callbacks_s": max(total - worker.waited_s, 0.0)}
+        else:
+            env_s = self._env_time() - self._env_time_at_start
+            parts = {"env_step_s": env_s, "rollout_other_s": max(self.rollout_s - env_s, 0.0),
+                     "update_and_callbacks_s": max(total - self.rollout_s, 0.0)}
         out = {k: round(v, 2) for k, v in parts.items()}
         out.update({k[:-2] + "_share": round(v / total, 3) if total > 0 else 0.0 for k, v in parts.items()})
         out["total_s"] = round(total, 2)

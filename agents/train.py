@@ -4,9 +4,10 @@
 What a run does:
 
 * the configuration (:mod:`agents.config`) is saved as ``OUT/config.yaml``;
-* ``n_envs`` environments in ``n_workers`` processes
-  (:class:`~agents.vec_env.MultiEnvSubprocVecEnv`), under ``VecNormalize`` (observations
-  and rewards), stepped by PPO;
+* ``n_envs`` environments (the batched env, or single envs in ``n_workers`` processes), under
+  ``VecNormalize`` (observations and rewards), stepped by PPO; with ``rollout_worker``, a second
+  process flies each rollout while the learner updates on the one before
+  (:class:`~agents.rollout_worker.RolloutWorker`);
 * an ``EvalCallback`` on a separate environment (same settings, its own seeds) every
   ``eval.freq`` env steps, saving the best model to ``OUT/best/``; periodic checkpoints
   in ``OUT/checkpoints/<steps>/``; TensorBoard logs in ``OUT/tb/``; a progress bar;
@@ -49,6 +50,7 @@ from agents.config import (
     base_controller_kwargs,
     save_config,
 )
+from agents.envs import vector_kind
 from wall_env import interrupts
 
 if TYPE_CHECKING:  # imported where used: agents.callbacks loads Stable-Baselines3
@@ -103,12 +105,6 @@ def planned_timesteps(config: dict[str, Any], start: int = 0, unfinished: bool =
 
 
 # ---------------------------------------------------------------------- pieces of a run
-def vector_kind(config: dict[str, Any]) -> str:
-    """The vector env a run uses: the configured one (residual agents too: on the batched env
-    their base controller predicts for the whole batch in one call)."""
-    return config.get("vector", "batched")
-
-
 def policy_description(config: dict[str, Any]) -> dict[str, Any]:
     """What ``policy.json`` says about every checkpoint of this configuration."""
     residual = None
@@ -264,7 +260,8 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         policy_info,
     )
     from agents.checkpoints import load_model, read_json, save_checkpoint, write_model_card
-    from agents.envs import evaluation_config, make_vec_env
+    from agents.envs import evaluation_config, make_training_env, make_vec_env
+    from agents.rollout_worker import RolloutWorker
     from controllers.threads import choose_threads
 
     started = time.perf_counter()
@@ -293,14 +290,20 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         out.mkdir(parents=True, exist_ok=True)
         save_config(config, out / "config.yaml")
 
-    venv = make_vec_env(config, config["n_envs"], config["n_workers"], vector=vector_kind(config))
+    # the worker's start (imports, its env and learner) overlaps the learner's own; a resumed run continues with
+    # Stable-Baselines3's own PPO as loaded (agents.checkpoints.load_model), in one process
+    worker = RolloutWorker(config) if config["rollout_worker"] and config["algo"] == "ppo" and not resume else None
+    try:
+        train_env = make_training_env(config)
+    except BaseException:
+        if worker is not None:
+            worker.close()
+        raise
+    venv = train_env.venv
     eval_env = None
     warm: dict[str, Any] | None = None
     teacher: dict[str, Any] | None = None
     try:
-        train_env = VecNormalize(venv, norm_obs=norm["norm_obs"], norm_reward=norm["norm_reward"],
-                                 clip_obs=float(norm["clip_obs"]), clip_reward=float(norm["clip_reward"]),
-                                 gamma=float(config["ppo"]["gamma"]))
         clock = TrainingClock(previous_wall)  # a warm start's demonstrations and cloning count as training time
         if resume:
             train_env.obs_rms, train_env.ret_rms = saved_normalizer.obs_rms, saved_normalizer.ret_rms
@@ -352,6 +355,8 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         if teacher is not None:  # the distilled policy is the result (no PPO steps follow); judged on the same episodes
             teacher["eval_mean_return"] = _evaluate_as_best(model, train_env, evaluation, out / "best",
                                                             policy_info(model, clock, description), checks)
+        if worker is not None:
+            model.rollout_worker = worker
         ppo_started = time.perf_counter()
         time_split = TimeSplit(venv)  # wrappers pass step_time_s on from the env (and a residual's base) that count it
         periodic = PeriodicCheckpoint(out / "checkpoints", int(config["checkpoint_freq"]), description, clock, checks,
@@ -385,9 +390,13 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         save_checkpoint(out, model, train_env, {**description, "num_timesteps": int(model.num_timesteps),
                                                 "wall_time_s": round(total_time, 3)}, checks)
     finally:
+        if worker is not None:
+            worker.close()
         venv.close()
         if eval_env is not None:
             eval_env.close()
+    if worker is not None:
+        model.rollout_worker = None  # the model goes on alone (a later learn() collects in this process)
 
     if not (out / "best" / "policy.json").is_file():  # no evaluation ran: the final model is the best we have
         from agents.checkpoints import copy_checkpoint
@@ -407,6 +416,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         **({"warm_start": {**warm, "ppo_wall_time_s": round(ppo_time, 2)}} if warm is not None else {}),
         "n_envs": config["n_envs"],
         "vector": vector_kind(config),
+        "rollout_worker": worker is not None,
         "n_workers": config["n_workers"] if vector_kind(config) == "subprocess" else 0,
         "seed": config["seed"],
         "resumed": bool(resume),

@@ -112,7 +112,7 @@ def cpus_per_run(config: dict[str, Any]) -> int:
     """The CPUs a training run keeps busy: its worker processes with ``vector: subprocess``, else (one batched
     env in the learner's process) the learner's PyTorch threads: the more of updates and rollouts when set
     explicitly, one for ``"auto"`` (the thread rule then keeps the run within the CPUs Ray gave it)."""
-    from agents.train import vector_kind
+    from agents.envs import vector_kind
 
     if vector_kind(config) == "subprocess":
         return max(1, int(config["n_workers"]))
