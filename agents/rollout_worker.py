@@ -13,7 +13,10 @@ the learner collects one; only the weights it acts with differ.
 from before that update, so the update on it starts one update past the policy that acted. PPO's
 ratio is taken against the log-probabilities the acting policy recorded (the rollout buffer's, as
 always), so the clipping bounds each step from the acting policy; the advantages are the acting
-critic's. The first rollout of a run is flown with the initial policy, as in one process.
+critic's. The first rollout of a run is flown with the initial policy, as in one process. Stale
+rollouts cost samples: on the sweep, 3M steps took 35 s instead of 56 s, but reaching the one-process
+recipe's error took more steps than the time saved (``agents/configs/wall_sweep.yaml`` records the
+runs), so training stays in one process unless ``rollout_worker`` is set.
 
 **What the learner sees.** :meth:`LeanPPO.collect_rollouts <agents.lean_ppo.LeanPPO.collect_rollouts>`
 hands the next rollout to the worker, then copies the finished one into its rollout buffer and replays
@@ -31,7 +34,7 @@ import multiprocessing as mp
 import signal
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -59,7 +62,6 @@ class Rollout:
     ret_rms: Any
     env_step_s: float  # inside the vector env's step
     fly_s: float  # the whole rollout
-    extra: dict[str, Any] = field(default_factory=dict)
 
     def infos_of_step(self, t: int) -> list[dict[str, Any]]:
         """Step ``t``'s infos as the vector env returned them: one dict per env."""
