@@ -105,7 +105,7 @@ def _serve(remote: Any, parent_remote: Any, config: dict[str, Any]) -> None:
 
         torch.set_num_threads(1)
         from agents.envs import make_training_env
-        from agents.train import make_ppo
+        from agents.learner import make_ppo
 
         env = make_training_env(config)
         model = make_ppo(config, env, None)  # seeded with the run's seed, as the learner is: the same first rollout

@@ -1,6 +1,6 @@
 """Training throughput of PPO on a wall task for several vector-env layouts.
 
-:func:`measure` trains the task's configured learner (:func:`agents.train.make_ppo`) for a number of
+:func:`measure` trains the task's configured learner (:func:`agents.learner.make_ppo`) for a number of
 env steps with one layout and returns env steps per second of wall time, PPO updates included (no
 evaluation, no checkpoints): ``batched`` (every env in one batched env in this process, what
 ``wall-inspector train`` uses), ``sb3`` (Stable-Baselines3's ``SubprocVecEnv``, one env per process)
@@ -42,7 +42,7 @@ def measure(task: str, layout: str, timesteps: int, overrides: Sequence[str] = (
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
     from agents.envs import env_factory, make_vec_env
-    from agents.train import make_ppo
+    from agents.learner import make_ppo
     from controllers.threads import choose_threads, limit_threads
 
     kind, n_envs, n_workers = parse_layout(layout)

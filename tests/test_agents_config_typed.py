@@ -71,7 +71,7 @@ def test_the_critic_can_be_wider_than_the_actor():
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.envs import make_vec_env
-    from agents.train import make_ppo
+    from agents.learner import make_ppo
 
     config = apply_overrides(default_config("WallSweep"), ["policy.critic_arch=[128, 128]", "n_envs=2"])
     policy = make_ppo(config, VecNormalize(make_vec_env(config, 2, vector="batched")), None).policy

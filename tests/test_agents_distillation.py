@@ -14,8 +14,8 @@ from agents.batched_vec_env import BatchedVecEnv
 from agents.config import default_config, validate_config
 from agents.demonstrations import record_demonstrations
 from agents.distillation import distil
+from agents.learner import make_ppo as _make_ppo
 from agents.residual import make_base_controller
-from agents.train import make_ppo as _make_ppo
 from controllers.threads import limit_threads
 from wall_inspector.cli import main
 

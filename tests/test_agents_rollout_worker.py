@@ -10,8 +10,9 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.config import apply_overrides, default_config
 from agents.envs import make_training_env
+from agents.learner import make_ppo
 from agents.rollout_worker import BUFFER_ARRAYS, RolloutWorker, WorkerError
-from agents.train import make_ppo, train
+from agents.train import train
 
 
 def _config(**changes) -> dict:
