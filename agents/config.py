@@ -343,7 +343,8 @@ class TrainingConfig:
     # rule within the free cores
     rollout_torch_threads: int | str = "auto"
     # rollouts in a second process, flown while the learner updates on the one before (agents.rollout_worker: one
-    # update behind; an iteration costs the longer of rollout and update instead of their sum)
+    # update behind; an iteration costs the longer of rollout and update instead of their sum); a run that may use one
+    # core only keeps them in its own process
     rollout_worker: bool = False
     ppo: PPOSettings = field(default_factory=PPOSettings)
     policy: PolicySettings = field(default_factory=PolicySettings)

@@ -238,7 +238,7 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     from agents.envs import evaluation_config, make_training_env, make_vec_env
     from agents.learner import make_ppo
     from agents.rollout_worker import RolloutWorker
-    from controllers.threads import choose_threads
+    from controllers.threads import allowed_cores, choose_threads
 
     started = time.perf_counter()
     out = Path(out_dir)
@@ -266,9 +266,12 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
         out.mkdir(parents=True, exist_ok=True)
         save_config(config, out / "config.yaml")
 
-    # the worker's start (imports, its env and learner) overlaps the learner's own; a resumed run continues with
-    # Stable-Baselines3's own PPO as loaded (agents.checkpoints.load_model), in one process
-    worker = RolloutWorker(config) if config["rollout_worker"] and config["algo"] == "ppo" and not resume else None
+    # the worker's start (imports, its env and learner) overlaps the learner's own. One process instead: a resumed run
+    # (it continues with Stable-Baselines3's own PPO as loaded, agents.checkpoints.load_model) and a run that may use
+    # one core only (a Ray trial of one CPU, an affinity of one core), where a second busy process would oversubscribe
+    cores = min(len(allowed_cores()), most_threads or len(allowed_cores()))
+    use_worker = config["rollout_worker"] and config["algo"] == "ppo" and not resume and cores >= 2
+    worker = RolloutWorker(config) if use_worker else None
     try:
         train_env = make_training_env(config)
     except BaseException:

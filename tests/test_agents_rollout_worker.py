@@ -136,3 +136,11 @@ def test_closing_with_a_rollout_in_flight_ends_the_worker_cleanly():
 def test_the_rollout_worker_setting_is_checked():
     with pytest.raises(ValueError, match="rollout_worker"):
         apply_overrides(default_config("WallSweep"), ["rollout_worker=3"])
+
+
+def test_a_run_that_may_use_one_core_keeps_its_rollouts_in_one_process(tmp_path):
+    run = train(_config(), tmp_path / "run", progress_bar=False, verbose=0, most_threads=1)  # a Ray trial of one CPU
+    assert run.card["training"]["rollout_worker"] is False
+    assert "waiting_for_rollouts_s" not in run.card["training"]["time_split"]
+    assert run.card["training"]["total_timesteps"] == 384
+
