@@ -58,6 +58,24 @@ class _Tanh(torch.autograd.Function):
         return torch.ops.aten.tanh_backward(grad, y)
 
 
+def _functional(layers: tuple[list[Any], list[Any]], grad: bool) -> Any:
+    """``obs -> (mean, value)`` of :meth:`LeanPPO._plain_layers`' layers applied as functions (no module calls; with
+    ``grad``, the minibatch tanh :class:`_Tanh`)."""
+    functions = {"tanh": _Tanh.apply if grad else torch.tanh, "relu": torch.relu, "elu": torch.nn.functional.elu}
+    linear = torch.nn.functional.linear
+    actor, critic = ([step if isinstance(step, tuple) else functions[step] for step in steps] for steps in layers)
+
+    def run(steps: list[Any], x: Any) -> Any:
+        for step in steps:
+            x = linear(x, step[0], step[1]) if isinstance(step, tuple) else step(x)
+        return x
+
+    def functional(obs: Any) -> tuple[Any, Any]:
+        return run(actor, obs), run(critic, obs)
+
+    return functional
+
+
 class LeanPPO(PPO):
     """Stable-Baselines3's PPO with lean rollouts and updates (module docstring).
 
@@ -121,29 +139,18 @@ class LeanPPO(PPO):
                 [*critic, (policy.value_net.weight, policy.value_net.bias)])
 
     def _networks(self, grad: bool) -> Any:
-        """``obs -> (mean, value)``: the MLPs' layers applied as functions (no module calls; with ``grad``, the
-        minibatch tanh :class:`_Tanh`) when the policy is plain (:meth:`_plain_layers`), else the modules themselves."""
+        """``obs -> (mean, value)``: the MLPs' layers applied as functions (:func:`_functional`) when the policy is
+        plain (:meth:`_plain_layers`), else the modules themselves."""
         layers = self._plain_layers()
+        if layers is not None:
+            return _functional(layers, grad)
         policy = self.policy
-        if layers is None:
-            def modules(obs: Any) -> tuple[Any, Any]:
-                latent_pi, latent_vf = self._latent(obs)
-                return policy.action_net(latent_pi), policy.value_net(latent_vf)
 
-            return modules
-        functions = {"tanh": _Tanh.apply if grad else torch.tanh, "relu": torch.relu, "elu": torch.nn.functional.elu}
-        linear = torch.nn.functional.linear
-        actor, critic = ([step if isinstance(step, tuple) else functions[step] for step in steps] for steps in layers)
+        def modules(obs: Any) -> tuple[Any, Any]:
+            latent_pi, latent_vf = self._latent(obs)
+            return policy.action_net(latent_pi), policy.value_net(latent_vf)
 
-        def run(steps: list[Any], x: Any) -> Any:
-            for step in steps:
-                x = linear(x, step[0], step[1]) if isinstance(step, tuple) else step(x)
-            return x
-
-        def functional(obs: Any) -> tuple[Any, Any]:
-            return run(actor, obs), run(critic, obs)
-
-        return functional
+        return modules
 
     def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
                 deterministic: bool = False) -> tuple[Any, Any]:
@@ -152,14 +159,15 @@ class LeanPPO(PPO):
         (the evaluations during training call it once per env step); anything else goes to SB3's."""
         policy = self.policy
         shape = tuple(policy.observation_space.shape or ())
-        if (not isinstance(observation, np.ndarray) or state is not None or len(shape) != 1
-                or observation.shape[-1:] != shape or observation.ndim > 2 or self._plain_layers() is None):
+        layers = (self._plain_layers() if isinstance(observation, np.ndarray) and state is None and len(shape) == 1
+                  and observation.shape[-1:] == shape and observation.ndim <= 2 else None)
+        if layers is None:
             return super().predict(observation, state, episode_start, deterministic)
         space = self.action_space
         assert isinstance(space, spaces.Box)
         with torch.no_grad():
             obs = torch.as_tensor(observation.reshape(-1, shape[0]), dtype=torch.float32)
-            mean, _ = self._networks(grad=False)(obs)
+            mean, _ = _functional(layers, grad=False)(obs)
             if not deterministic:
                 mean = mean + torch.randn_like(mean) * policy.log_std.exp()
         actions = np.clip(mean.numpy(), space.low, space.high)
