@@ -89,13 +89,6 @@ def _steps_recorder() -> Any:
     return Recorder()
 
 
-def _step_time(env: Any) -> float:
-    from agents.timing import counting_env
-
-    counting = counting_env(env)
-    return float(getattr(counting, "step_time_s", 0.0)) if counting is not None else 0.0
-
-
 def _serve(remote: Any, parent_remote: Any, config: dict[str, Any]) -> None:
     """The worker: build the training env and a learner on it, then fly a rollout per ``fly`` command."""
     parent_remote.close()
@@ -134,19 +127,21 @@ def _serve(remote: Any, parent_remote: Any, config: dict[str, Any]) -> None:
 def _fly(model: Any, env: Any, data: dict[str, Any]) -> Rollout:
     import torch
 
+    from agents.timing import step_seconds
+
     started = time.perf_counter()
     model.policy.load_state_dict({k: torch.as_tensor(v) for k, v in data["weights"].items()})
     if data.get("obs_rms") is not None:  # the learner's statistics (a resumed run's): ours from here on
         env.obs_rms, env.ret_rms = data["obs_rms"], data["ret_rms"]
     recorder = _steps_recorder()
     callback = model._init_callback(recorder)
-    env_time = _step_time(env)
+    env_time = step_seconds(env)
     buffer = model.rollout_buffer
     if not model.collect_rollouts(env, callback, buffer, int(data["n_steps"])):  # pragma: no cover - never stops
         raise RuntimeError("the worker's rollout stopped early")
     arrays = {name: np.array(getattr(buffer, name)) for name in BUFFER_ARRAYS}
     return Rollout(arrays, np.stack(recorder.dones), recorder.infos, env.obs_rms, env.ret_rms,
-                   env_step_s=_step_time(env) - env_time, fly_s=time.perf_counter() - started)
+                   env_step_s=step_seconds(env) - env_time, fly_s=time.perf_counter() - started)
 
 
 class RolloutWorker:

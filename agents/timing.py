@@ -21,10 +21,10 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
-__all__ = ["TimeSplit", "counting_env"]
+__all__ = ["TimeSplit", "step_seconds"]
 
 
-def counting_env(env: Any) -> Any:
+def _counting_env(env: Any) -> Any:
     """The outermost env of a vector-env wrapper chain (``.venv`` links) that keeps ``step_time_s``
     itself (SB3's wrappers forward attribute lookups, but refuse names found on two levels)."""
     while env is not None:
@@ -34,12 +34,19 @@ def counting_env(env: Any) -> Any:
     return None
 
 
+def step_seconds(env: Any) -> float:
+    """Seconds the vector env ``env`` (a wrapper chain) has spent inside ``step`` so far, as the env that counts
+    them keeps it; 0 when none does."""
+    counting = _counting_env(env)
+    return float(getattr(counting, "step_time_s", 0.0)) if counting is not None else 0.0
+
+
 class TimeSplit(BaseCallback):
     """Times rollouts and updates; see the module docstring."""
 
     def __init__(self, env: Any = None):
         super().__init__()
-        self.env = counting_env(env)  # the outermost env of the wrapper chain that counts its step time
+        self.env = _counting_env(env)  # the outermost env of the wrapper chain that counts its step time
         self.rollout_s = 0.0
         self._training_start = 0.0
         self._rollout_start = 0.0
@@ -48,7 +55,7 @@ class TimeSplit(BaseCallback):
         self.worker: Any = None
 
     def _env_time(self) -> float:
-        return float(getattr(self.env, "step_time_s", 0.0)) if self.env is not None else 0.0
+        return step_seconds(self.env)
 
     def _on_training_start(self) -> None:
         self.worker = getattr(self.model, "rollout_worker", None)  # its figures are read after it has been closed
