@@ -164,7 +164,6 @@ class RolloutWorker:
         self._ready = False
         self.flying = False
         self.closed = False
-        self.rollouts = 0
         self.waited_s = 0.0  # the learner's time spent waiting for a rollout
         self.env_step_s = 0.0  # the worker's time inside the env's step
         self.fly_s = 0.0  # the worker's time flying rollouts
@@ -200,7 +199,6 @@ class RolloutWorker:
         rollout: Rollout = self._receive()
         self.flying = False
         self.waited_s += time.perf_counter() - started
-        self.rollouts += 1
         self.env_step_s += rollout.env_step_s
         self.fly_s += rollout.fly_s
         return rollout

@@ -269,20 +269,16 @@ def train(config: dict[str, Any], out_dir: str | Path, *, resume: bool = False, 
     # the worker's start (imports, its env and learner) overlaps the learner's own. One process instead: a resumed run
     # (it continues with Stable-Baselines3's own PPO as loaded, agents.checkpoints.load_model) and a run that may use
     # one core only (a Ray trial of one CPU, an affinity of one core), where a second busy process would oversubscribe
-    cores = min(len(allowed_cores()), most_threads or len(allowed_cores()))
+    cores = min(len(allowed_cores()), most_threads or sys.maxsize)
     use_worker = config["rollout_worker"] and config["algo"] == "ppo" and not resume and cores >= 2
-    worker = RolloutWorker(config) if use_worker else None
-    try:
-        train_env = make_training_env(config)
-    except BaseException:
-        if worker is not None:
-            worker.close()
-        raise
+    train_env = make_training_env(config)
     venv = train_env.venv
+    worker = None
     eval_env = None
     warm: dict[str, Any] | None = None
     teacher: dict[str, Any] | None = None
     try:
+        worker = RolloutWorker(config) if use_worker else None
         clock = TrainingClock(previous_wall)  # a warm start's demonstrations and cloning count as training time
         if resume:
             train_env.obs_rms, train_env.ret_rms = saved_normalizer.obs_rms, saved_normalizer.ret_rms
