@@ -24,9 +24,9 @@ def shipped(tmp_path_factory):
     return load_policy(source), OnnxPolicy(path)
 
 
-@pytest.fixture(scope="module")
-def other_agent(tmp_path_factory):
-    """An untrained agent of another architecture (ReLU, 32-16 units) with far-from-unit statistics."""
+def _untrained_hover_agent(folder, action_scale: float = 1.0):
+    """An untrained agent of another architecture (ReLU, 32-16 units) with far-from-unit statistics; its action
+    layer's weights times ``action_scale``."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
@@ -43,10 +43,28 @@ def other_agent(tmp_path_factory):
         venv.step(np.full((1, 4), 0.3, dtype=np.float32))
     model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, device="cpu", seed=1,
                 policy_kwargs={"net_arch": [32, 16], "activation_fn": torch.nn.ReLU})
-    folder = tmp_path_factory.mktemp("agent") / "hover"
+    with torch.no_grad():
+        model.policy.action_net.weight.mul_(action_scale)
     save_checkpoint(folder, model, venv, {**policy_description(config), "num_timesteps": 0}, check_observations(config))
     venv.close()
     return folder
+
+
+@pytest.fixture(scope="module")
+def other_agent(tmp_path_factory):
+    return _untrained_hover_agent(tmp_path_factory.mktemp("agent") / "hover")
+
+
+@pytest.fixture(scope="module")
+def loud_agent(tmp_path_factory):
+    """The same untrained agent with its action layer 100x: most of its raw actions lie beyond the bounds."""
+    return _untrained_hover_agent(tmp_path_factory.mktemp("agent") / "loud", action_scale=100.0)
+
+
+def _observations_around(agent, seed: int, spread: float) -> np.ndarray:
+    statistics = agent.vec_normalize.obs_rms
+    return (statistics.mean + np.sqrt(statistics.var)
+            * np.random.default_rng(seed).normal(0.0, spread, (256, 48))).astype(np.float32)
 
 
 def test_the_onnx_policy_gives_the_python_agents_actions_over_a_whole_flight(shipped):
@@ -81,15 +99,25 @@ def test_a_broken_observation_gives_the_hover_action_and_clipping_holds(shipped)
     got, _ = exported.predict(observations)
     np.testing.assert_array_equal(got[[5, 9]], 0.0)
     assert np.max(np.abs(got - expected)) <= 1e-5
-    assert np.all(np.abs(got) <= 1.0) and np.any(np.abs(got) == 1.0)  # the action space's bounds, reached
+    assert np.all(np.abs(got) <= 1.0)
+
+
+def test_actions_beyond_the_bounds_are_clipped_as_python_clips_them(loud_agent, tmp_path):
+    path = export_onnx(loud_agent, tmp_path / "loud.onnx")
+    python, exported = load_policy(loud_agent), OnnxPolicy(path)
+    observations = _observations_around(python, seed=5, spread=2.0)
+    expected, _ = python.predict(observations)
+    got, _ = exported.predict(observations)
+    assert np.max(np.abs(got - expected)) <= 1e-5
+    assert np.all(np.abs(got) <= 1.0)
+    assert np.mean(np.abs(got) == 1.0) > 0.3  # the action space's bounds, reached by many actions
+    assert np.any((np.abs(got) > 0.0) & (np.abs(got) < 1.0))  # and the rest passed through
 
 
 def test_any_agent_folder_exports_with_its_own_network_and_statistics(other_agent, tmp_path):
     path = export_onnx(other_agent, tmp_path / "hover.onnx")
     python, exported = load_policy(other_agent), OnnxPolicy(path)
-    statistics = python.vec_normalize.obs_rms
-    observations = (statistics.mean + np.sqrt(statistics.var)
-                    * np.random.default_rng(4).normal(0.0, 2.0, (256, 48))).astype(np.float32)
+    observations = _observations_around(python, seed=4, spread=2.0)
     expected, _ = python.predict(observations)
     got, _ = exported.predict(observations)
     assert np.max(np.abs(got - expected)) <= 1e-5
