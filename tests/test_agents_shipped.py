@@ -204,3 +204,6 @@ def test_the_budget_counts_the_development_runs_a_model_card_records():
     assert rows[1]["env_steps"] == sum(r["env_steps"] for r in runs)
     assert rows[1]["wall_time_s"] == sum(r["wall_time_s"] for r in runs)
     assert "development runs (not shipped)" in budget_markdown(rows)
+    circle = [r for r in budgets("tuned", ["WallCircle"], with_ppo=True) if r["method"] == "PPO"]
+    circle_runs = json.loads((pretrained_path("WallCircle") / "model_card.json").read_text())["development"]["runs"]
+    assert len(circle_runs) == 1 and circle[1]["settings"] == "1 development run (not shipped)"

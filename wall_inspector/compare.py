@@ -288,7 +288,8 @@ def budgets(preset: str, tasks: list[str], with_ppo: bool) -> list[dict[str, Any
                              "wall_time_s": training["total_wall_time_s"]})
                 runs = (card.get("development") or {}).get("runs") or []
                 if runs:  # the runs that chose the shipped configuration count too
-                    rows.append({"task": task, "method": "PPO", "settings": f"{len(runs)} development runs (not shipped)",
+                    named = f"{len(runs)} development run" + ("s" if len(runs) != 1 else "")
+                    rows.append({"task": task, "method": "PPO", "settings": f"{named} (not shipped)",
                                  "trials": None, "env_steps": sum(int(r["env_steps"]) for r in runs),
                                  "wall_time_s": sum(float(r["wall_time_s"]) for r in runs)})
     return rows
