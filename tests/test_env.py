@@ -90,6 +90,31 @@ def test_hover_in_free_space_without_noise_stays_put():
     env.close()
 
 
+@pytest.mark.parametrize("env_id", ["WallInspector/WallHover-v0", "WallInspector/Corridor-v0"])
+def test_the_wall_normal_weight_prices_the_error_along_the_nearest_walls_normal(env_id):
+    """Two envs alike but for reward_weights["wall_normal"] fly the same flight; their rewards differ by the weight
+    times the position error along the outward normal of the wall nearest to a rotor, at every step."""
+    weight = 16.0
+    plain = gym.make(env_id)
+    priced = gym.make(env_id, reward_weights={"wall_normal": weight})
+    plain.reset(seed=4)
+    priced.reset(seed=4)
+    actions = np.random.default_rng(4).uniform(-0.3, 0.3, (60, 4))
+    differences, expected = [], []
+    for action in actions:
+        obs, reward, _, _, info = plain.step(action)
+        _, reward_priced, _, _, info_priced = priced.step(action)
+        assert info_priced["p_world"] == pytest.approx(info["p_world"], abs=0.0)  # the reward does not fly
+        normal = parse_observation(obs)["wall_normal"]  # exact state: the true nearest wall's normal
+        assert np.linalg.norm(normal) == pytest.approx(1.0)
+        differences.append(reward - reward_priced)
+        expected.append(weight * abs(np.dot(info["p_world"] - info["p_ref"], normal)))
+    assert np.asarray(differences) == pytest.approx(np.asarray(expected), rel=1e-9, abs=1e-12)
+    assert min(expected) > 0.0  # the flight is off the reference along the normal: the term is priced
+    plain.close()
+    priced.close()
+
+
 def test_suction_pulls_the_open_loop_vehicle_into_the_wall():
     env = gym.make("WallInspector/WallHover-v0", **QUIET)
     env.reset(seed=0, options={"perturb_start": False})

@@ -464,6 +464,10 @@ class EnvBatch:
                   - w["velocity"] * np.sqrt((v_error * v_error).sum(axis=1))
                   - w["smoothness"] * (change * change).sum(axis=1)
                   - w["body_rate"] * (omega * omega).sum(axis=1))
+        if w["wall_normal"]:
+            normal = self._nearest_surface(self.distances, self.surface_distance, self.surface_normal,
+                                           self.simulator.scene)[1]
+            reward -= w["wall_normal"] * np.abs((p_error * normal).sum(axis=1))
         strayed = ~(error <= cfg.max_tracking_error)  # also catches a NaN state
         reward -= cfg.collision_penalty * (contact | strayed)
         terminated = strayed | (contact & cfg.terminate_on_collision)
@@ -488,28 +492,32 @@ class EnvBatch:
         obs[:, f["p_error"]] = x[:, StateIndex.p_world] - (ref[:, 0:3] + self.ref_offset[rows])
         obs[:, f["v_error"]] = x[:, StateIndex.v_world] - ref[:, 3:6]
         obs[:, f["reference_preview"]] = ref[:, 6:]
-        if self.surfaces is not None:  # planes and bodies: each rotor's nearest of all
-            clearance, normal = self._clearance(self.distances_estimate[rows], self.surface_distance_estimate[rows],
-                                                self.surface_normal_estimate[rows], self.simulator.scene[rows])
-            # a rotor with no surface within the query's reach reads the reach
-            obs[:, f["rotor_clearance"]] = np.minimum(clearance, min(self.surfaces.reach, CLEARANCE_CAP))
-            obs[:, f["wall_normal"]] = normal
-        elif self._n_walls:
-            if self._n_walls == 1:
-                obs[:, f["rotor_clearance"]] = np.minimum(self.distances_estimate[rows], CLEARANCE_CAP)
-                obs[:, f["wall_normal"]] = self.simulator.scene[rows, 3:6]
-            else:
-                d = self.distances_estimate[rows].reshape(n, 4, self._n_walls)  # [row, rotor, wall]
-                obs[:, f["rotor_clearance"]] = np.minimum(d.min(axis=2), CLEARANCE_CAP)
-                nearest = np.argmin(d.min(axis=1), axis=1)
-                normals = self.simulator.scene[rows, : 6 * self._n_walls].reshape(n, self._n_walls, 2, 3)[:, :, 1]
-                obs[:, f["wall_normal"]] = normals[np.arange(n), nearest]
-        else:
-            obs[:, f["rotor_clearance"]] = CLEARANCE_CAP
-            obs[:, f["wall_normal"]] = 0.0
+        clearance, normal = self._nearest_surface(self.distances_estimate[rows], self.surface_distance_estimate[rows],
+                                                  self.surface_normal_estimate[rows], self.simulator.scene[rows])
+        # a rotor with no surface within the query's reach reads the reach
+        reach = min(self.surfaces.reach, CLEARANCE_CAP) if self.surfaces is not None else CLEARANCE_CAP
+        obs[:, f["rotor_clearance"]] = np.minimum(clearance, reach)
+        obs[:, f["wall_normal"]] = normal
         obs[:, f["previous_action"]] = self.previous_action[rows]
         obs[:, OBSERVATION_FIELDS["time"].start] = i * self.config.control_dt
         return obs
+
+    def _nearest_surface(self, plane_distances: np.ndarray, surface_distance: np.ndarray, surface_normal: np.ndarray,
+                         scene: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each rotor's distance to its nearest wall plane or body surface ``(k, 4)`` (``inf`` where none is known)
+        and the outward normal of the surface nearest to any rotor ``(k, 3)`` (zeros where none is known), from
+        the rows' plane distances ``(k, 4 * walls)`` and body-surface distances and normals (true or estimated)."""
+        if self.surfaces is not None:  # planes and bodies: each rotor's nearest of all
+            return self._clearance(plane_distances, surface_distance, surface_normal, scene)
+        k = plane_distances.shape[0]
+        if not self._n_walls:
+            return np.full((k, 4), np.inf), np.zeros((k, 3))
+        if self._n_walls == 1:
+            return plane_distances, scene[:, 3:6]
+        d = plane_distances.reshape(k, 4, self._n_walls)  # [row, rotor, wall]
+        nearest = np.argmin(d.min(axis=1), axis=1)
+        normals = scene[:, : 6 * self._n_walls].reshape(k, self._n_walls, 2, 3)[:, :, 1]
+        return d.min(axis=2), normals[np.arange(k), nearest]
 
     def _clearance(self, plane_distances: np.ndarray, surface_distance: np.ndarray, surface_normal: np.ndarray,
                    scene: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -32,7 +32,11 @@ from wall_env.vehicle import GRAVITY, VehicleParams
 
 __all__ = ["EnvConfig", "DEFAULT_REWARD_WEIGHTS", "RANDOMIZABLE", "RENDER_MODES", "MAX_EPISODE_STEPS"]
 
-DEFAULT_REWARD_WEIGHTS = {"alive": 1.0, "position": 2.0, "velocity": 0.2, "smoothness": 0.1, "body_rate": 0.01}
+# per step: alive bonus; per metre of position error, per m/s of velocity error; per squared action change and
+# (rad/s)^2 of body rate; per metre of position error along the outward normal of the surface nearest to a rotor
+# (wall_normal: on top of position, the wall-normal part weighed again; zero, or no surface known, adds nothing)
+DEFAULT_REWARD_WEIGHTS = {"alive": 1.0, "position": 2.0, "velocity": 0.2, "smoothness": 0.1, "body_rate": 0.01,
+                          "wall_normal": 0.0}
 # per-episode settings the envs can draw, in the order of the random draws at reset: the suction's k_s (N/m)
 # and d_thr (m), the stand-off (m) and mass (kg); a steady horizontal push (N, its direction uniform in the
 # horizontal plane: one more draw), the rotors' time constant (s), the latency (s, the round trip, split

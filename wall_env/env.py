@@ -11,8 +11,9 @@ Observation
     ``Box((48,), float32)``, see :mod:`wall_env.observation`.
 Reward (weights in ``reward_weights``)
     ``alive - position * |p_error| - velocity * |v_error| - smoothness * |a - a_prev|^2
-    - body_rate * |omega|^2``, minus ``collision_penalty`` on a collision and when the
-    vehicle strays more than ``max_tracking_error`` from the reference.
+    - body_rate * |omega|^2 - wall_normal * |p_error . n|`` (``n``: outward normal of the
+    surface nearest to a rotor; ``wall_normal`` is 0 unless set), minus ``collision_penalty``
+    on a collision and when the vehicle strays more than ``max_tracking_error`` from the reference.
 Reset options
     ``{"perturb_start": False}`` starts exactly on the reference (default: a uniform
     perturbation of position, velocity and attitude whose size each task sets; a start
