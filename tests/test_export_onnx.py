@@ -102,12 +102,15 @@ def test_a_broken_observation_gives_the_hover_action_and_clipping_holds(shipped)
     assert np.all(np.abs(got) <= 1.0)
 
 
+def _both_actions(agent, path, seed: int) -> tuple[np.ndarray, np.ndarray, OnnxPolicy]:
+    """The Python agent's and its ONNX export's actions on 256 observations around its statistics."""
+    python, exported = load_policy(agent), OnnxPolicy(export_onnx(agent, path))
+    observations = _observations_around(python, seed=seed, spread=2.0)
+    return python.predict(observations)[0], exported.predict(observations)[0], exported
+
+
 def test_actions_beyond_the_bounds_are_clipped_as_python_clips_them(loud_agent, tmp_path):
-    path = export_onnx(loud_agent, tmp_path / "loud.onnx")
-    python, exported = load_policy(loud_agent), OnnxPolicy(path)
-    observations = _observations_around(python, seed=5, spread=2.0)
-    expected, _ = python.predict(observations)
-    got, _ = exported.predict(observations)
+    expected, got, _ = _both_actions(loud_agent, tmp_path / "loud.onnx", seed=5)
     assert np.max(np.abs(got - expected)) <= 1e-5
     assert np.all(np.abs(got) <= 1.0)
     assert np.mean(np.abs(got) == 1.0) > 0.3  # the action space's bounds, reached by many actions
@@ -115,11 +118,7 @@ def test_actions_beyond_the_bounds_are_clipped_as_python_clips_them(loud_agent, 
 
 
 def test_any_agent_folder_exports_with_its_own_network_and_statistics(other_agent, tmp_path):
-    path = export_onnx(other_agent, tmp_path / "hover.onnx")
-    python, exported = load_policy(other_agent), OnnxPolicy(path)
-    observations = _observations_around(python, seed=4, spread=2.0)
-    expected, _ = python.predict(observations)
-    got, _ = exported.predict(observations)
+    expected, got, exported = _both_actions(other_agent, tmp_path / "hover.onnx", seed=4)
     assert np.max(np.abs(got - expected)) <= 1e-5
     assert exported.metadata["env_id"] == "WallInspector/WallHover-v0"
 
