@@ -543,14 +543,8 @@ class EnvBatch:
         n = self.n
         forces = self.forces.reshape(n, -1, 3).copy()  # [row, effect, axis]
         suction = forces[:, self._suction_index] if self._suction_index is not None else np.zeros((n, 3))
-        if self.surfaces is not None:
-            nearest = self._clearance(self.distances, self.surface_distance, self.surface_normal,
-                                      self.simulator.scene)[0]
-            clearance = nearest.min(axis=1) - self.config.vehicle.duct_radius
-        elif self._n_walls:
-            clearance = self.distances.min(axis=1) - self.config.vehicle.duct_radius
-        else:
-            clearance = np.full(n, np.inf)
+        nearest = self._nearest_surface(self.distances, self.surface_distance, self.surface_normal, self.simulator.scene)[0]
+        clearance = nearest.min(axis=1) - self.config.vehicle.duct_radius  # inf where no surface is known
         return {
             "time": i * self.config.control_dt,
             "p_world": x[:, StateIndex.p_world],
