@@ -248,8 +248,9 @@ def plan(args: argparse.Namespace) -> int:
     note = (f"\nFrom {len(seconds)} flights measured by `compare --ray` ({sum(seconds) / 60:.1f} min of flying in all, "
             f"longest flight {max(seconds):.1f} s): each column is the list-scheduling makespan of the measured "
             f"per-flight times on machines x {args.cpus_per_machine} CPUs, one flight per CPU, in the order compare "
-            "submits them (`wall-inspector bench-ray --plan`); the next column as if a machine flew one flight at a time, "
-            "as this shared machine's two CPUs did in `bench-ray` (two flights at once took about twice as long each). "
+            "submits them (`wall-inspector bench-ray --plan`); the next column as if a machine flew one flight at a time "
+            "(machines whose second CPU other work keeps busy: `bench-ray`'s control row tells how much of it a machine "
+            "gives). "
             "Ray's start and per-flight overhead are not included")
     if trial_minutes is not None:
         note += (f"; the sweep is {args.trials} training runs of {trial_minutes:.1f} min each ({trial_steps:,} env steps: "
