@@ -20,7 +20,11 @@ by predicting held-out folds, and names the best answer:
   wind, turbulence).
 
 A quantity that moves with the manoeuvre (the height on a sinusoidal climb) and a time
-period can predict alike; the state is then preferred, since it names a cause.
+period can predict alike; the state is then preferred, since it names a cause. A position
+map names none: on a flight that repeats its path, a gust at nearly the path's period is
+also a function of where the vehicle is (a 0.202 Hz gust on a 5 s sweep: the map predicted
+80 % of it, the sinusoid 99 %), so the map is named only when it predicts at least as much
+as the sinusoid.
 """
 
 from __future__ import annotations
@@ -195,11 +199,14 @@ def where_it_lives(data: FlightData, residual: np.ndarray, candidates: list[Regr
     region = position.get("region")
     by_place = position["explained_fraction"] if region is not None \
         and region["fraction_of_flight"] <= MAX_REGION_SHARE else 0.0
-    best_place = max(by_state, by_place)
+    # a state names a cause and is preferred over a period it nearly matches; a map of cells names none and is
+    # preferred only when it predicts at least as much as the sinusoid of two coefficients per axis
+    named_state = by_state >= threshold and by_state >= _STATE_OVER_TIME * periodic
+    named_place = by_place >= threshold and by_place >= periodic
     if steady:
         lives_in = "everywhere"
-    elif best_place >= threshold and best_place >= _STATE_OVER_TIME * periodic:
-        lives_in = "states" if by_state >= by_place else "position"
+    elif named_state or named_place:
+        lives_in = "states" if named_state and (by_state >= by_place or not named_place) else "position"
     elif periodic >= threshold:
         lives_in = "time (periodic)"
     elif spectrum.get("slow_share", 0.0) >= 0.5:

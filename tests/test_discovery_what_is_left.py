@@ -79,6 +79,21 @@ def test_a_gust_on_a_steady_wind_keeps_the_wind_and_names_the_gust(tmp_path):
     assert found.unexplained_["time"]["peak_hz"] == pytest.approx(0.22, abs=0.01)
 
 
+def test_a_gust_at_the_sweeps_own_period_is_a_gust_and_the_wind_under_it_is_kept(tmp_path):
+    """A 0.202 Hz gust on a sweep along x of 5 s period: over the flight the gust is nearly a function of where the
+    vehicle is, and a position map predicted 80 % of it against the sinusoid's 99 %. Called 'a region of the
+    flight', the map took the steady wind's place and the wind was dropped as a stand-in."""
+    wind = [0.22, -0.22, -0.23]
+    found = Discovery().fit(read_log(_log(tmp_path, "locked", {"wind_force": wind, "gust": ([0.34, 0.23, 0.0], 0.202)},
+                                          306, duration=60.0)))
+    assert found.names_ == ["constant_force"] and found.stand_ins_ == []
+    assert max(relative_errors(found.effects_[0].values, {"F": wind})) < 0.1
+    left = found.unexplained_
+    assert left["lives_in"] == "time (periodic)"
+    assert left["time"]["peak_hz"] == pytest.approx(0.202, abs=0.01)
+    assert left["position"]["explained_fraction"] > 0.5  # the map does predict much of it: the sinusoid more
+
+
 def test_a_force_growing_with_height_is_not_written_as_a_thrust_scale(tmp_path):
     """-0.8 N per metre of height on a climb and descent: the thrust falls as the vehicle rises, so a thrust scale
     (and a steady force, its mean) stand in for it; next to a shape-free function of height they lose on held-out
