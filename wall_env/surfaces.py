@@ -316,7 +316,7 @@ class SurfaceQuery:
         if self._bullet is not None:
             try:
                 self._bullet.disconnect()
-            except pybullet.error:
+            except (AttributeError, getattr(pybullet, "error", RuntimeError)):  # at exit the module may be gone
                 pass
             self._bullet = None
 
