@@ -187,10 +187,12 @@ def write_report(report: dict[str, Any], path: str | Path) -> Path:
     return path
 
 
-def _reduction(before: float | None, after: float | None) -> str:
+def _change(before: float | None, after: float | None) -> str:
+    """``x % smaller`` or ``x % larger`` (a gap that grew is never said to be a negative share smaller)."""
     if before is None or after is None or not before:
         return "n/a"
-    return f"{100 * (1 - after / before):.0f} %"
+    share = 1 - after / before
+    return f"{100 * share:.0f} % smaller" if share >= 0 else f"{-100 * share:.0f} % larger"
 
 
 def format_summary(report: dict[str, Any]) -> str:
@@ -246,14 +248,14 @@ def format_summary(report: dict[str, Any]) -> str:
     b, a = report["gap_before"], report["gap_after"]
     if b.get("force_rms_N") is not None:
         lines.append(f"held-out force residual RMS: {_number(b['force_rms_N'])} N -> {_number(a['force_rms_N'])} N "
-                     f"({_reduction(b['force_rms_N'], a['force_rms_N'])} smaller)")
+                     f"({_change(b['force_rms_N'], a['force_rms_N'])})")
         if b.get("prediction_rms_m") is None:
             lines.append("held-out open-loop prediction RMS: n/a (no prediction window fits inside one "
                          "cross-validation block; a longer log or a shorter --horizon gives one)")
         else:
             lines.append(f"held-out open-loop prediction RMS: {_number(b['prediction_rms_m'])} m -> "
                          f"{_number(a['prediction_rms_m'])} m "
-                         f"({_reduction(b['prediction_rms_m'], a['prediction_rms_m'])} smaller)")
+                         f"({_change(b['prediction_rms_m'], a['prediction_rms_m'])})")
     flights = report.get("flights") or {}
     for record in flights.get("conditions") or []:
         winds = "; ".join(f"{name} wind {_fmt(v['w'])} +- {_fmt(v.get('w_std'))} m/s" for name, v in record.items()
