@@ -28,7 +28,7 @@ import numpy as np
 from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 
-__all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "resting_on_ground", "ground_contact", "flight_limits",
+__all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "resting_on_ground", "ground_contact", "flight_limits", "nearest_wall",
            "scene_problems"]
 
 REST_THRUST_SHARE = 0.5  # of the weight
@@ -94,6 +94,17 @@ def ground_contact(log: FlightLog) -> tuple[np.ndarray, np.ndarray]:
     return resting, contact
 
 
+def nearest_wall(regressors: list) -> float | None:
+    """The rotors' closest approach to a wall (m) over the flight, inf when never finite; None when the scene has no
+    wall."""
+    walls = [r for r in regressors if r.name.startswith("nearest rotor distance to wall")
+             or r.name == "nearest rotor distance to the structure"]
+    if not walls:
+        return None
+    distances = [float(np.nanmin(r.values)) for r in walls if np.isfinite(r.values).any()]
+    return min(distances) if distances else float("inf")
+
+
 def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
     """Effects this flight cannot determine, each ``{"effects", "reason", "manoeuvre"}``."""
     values = {r.name: r.values for r in regressors}
@@ -103,15 +114,12 @@ def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
         v = values.get(name)
         return None if v is None or not np.isfinite(v).any() else float(np.nanmin(v))
 
-    walls = sorted(n for n in values if n.startswith("nearest rotor distance to wall")
-                   or n == "nearest rotor distance to the structure")
-    if not walls:
+    nearest = nearest_wall(regressors)
+    if nearest is None:
         out.append({"effects": ["wall_suction"], "reason": "the scene has no wall",
                     "manoeuvre": "add the wall to the scene (sidecar or --scene) and fly within "
                                  f"{NEAR_SURFACE:g} m of it"})
     else:
-        distances = [d for d in (closest(n) for n in walls) if d is not None]
-        nearest = min(distances) if distances else float("inf")
         if nearest > NEAR_SURFACE:
             out.append({"effects": ["wall_suction"],
                         "reason": f"the rotors never came closer than {nearest:.2f} m to a wall",

@@ -27,7 +27,7 @@ from discovery.fitting import EffectTerm
 from discovery.residuals import FlightData
 from wall_env.effects import Effect, WallSuction, make_effect
 
-__all__ = ["BoundedWall", "BoundedWallTerm", "find_edge", "plain_wall", "OUTSIDE_GAIN", "INSIDE_GAIN"]
+__all__ = ["BoundedWall", "BoundedWallTerm", "find_edge", "side_gains", "plain_wall", "OUTSIDE_GAIN", "INSIDE_GAIN"]
 
 OUTSIDE_GAIN = 0.3  # beyond the edge the data show less than this share of the modelled suction
 INSIDE_GAIN = 0.6  # and on the wall's side at least this share
@@ -137,6 +137,18 @@ def find_edge(data: FlightData, suction_force: np.ndarray, data_suction: np.ndar
         return None
     best["sse_share"] = 1.0 - best.pop("sse") / plain if plain > 0 else 0.0
     return best
+
+
+def side_gains(data: FlightData, suction_force: np.ndarray, data_suction: np.ndarray, edge: dict) -> dict[str, float]:
+    """``{"gain_inside", "gain_outside"}``: the share of the modelled suction ``suction_force`` ``(N, 3)`` that the
+    data's ``data_suction`` show on the wall's side of ``edge`` (``axis``, ``side``, ``edge_m``) and beyond it, where
+    the suction acts."""
+    magnitude = np.linalg.norm(suction_force, axis=1)
+    acting = magnitude >= 0.1 * float(np.quantile(magnitude, 0.98)) if len(magnitude) else np.zeros(0, dtype=bool)
+    x = np.concatenate(_coordinates(data)[edge["axis"]])[acting]
+    inside = x <= edge["edge_m"] if edge["side"] == "below" else x >= edge["edge_m"]
+    f, y = suction_force[acting], data_suction[acting]
+    return {"gain_inside": _gain(y[inside], f[inside]), "gain_outside": _gain(y[~inside], f[~inside])}
 
 
 def _gain(y: np.ndarray, f: np.ndarray) -> float:
