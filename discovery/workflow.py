@@ -247,7 +247,7 @@ class Discovery:
         self.stand_ins_: list[dict] = []
         self.withheld_: dict[str, Any] | None = None
         final, self._hold, self.undetermined_ = refit_determined(selection.fitter, selection.chosen, self._say)
-        final, selection = self._chosen_without_bounded(data, excluded, final, selection)
+        final, selection = self._chosen_without_bounded(data, r_nom, excluded, final, selection)
         self.selection_ = selection
         final = self._cancelling(data, final, selection)
         final = self._never_worse(data, r_nom, self._wall_edge(data, r_nom, final, selection, excluded), selection)
@@ -278,8 +278,8 @@ class Discovery:
         self.runtime_s_ = time.perf_counter() - started
         return self
 
-    def _chosen_without_bounded(self, data: FlightData, excluded: set[str], final: Candidate,
-                                selection: Selection) -> tuple[Candidate, Selection]:
+    def _chosen_without_bounded(self, data: FlightData, r_nom: list[np.ndarray], excluded: set[str],
+                                final: Candidate, selection: Selection) -> tuple[Candidate, Selection]:
         """The effects chosen again without those left out because a parameter ran to a bound of its range.
 
         Such an effect did something no value of it inside its range does, and it took the place of what the
@@ -293,9 +293,8 @@ class Discovery:
         if not bounded or self.effect is not None or selection.fitter is None:
             return final, selection
         self._say(f"choosing the effects again without {', '.join(bounded)}, left out at a bound of its range")
-        saved = (self.limits_, self.residual_before_, self.where_before_)
-        r_nom, again = self._choose(data, False, set(excluded) | set(bounded))
-        self.limits_, self.residual_before_, self.where_before_ = saved
+        templates = [t for t in self._templates if t.name not in set(excluded) | set(bounded)]
+        again = forward_selection(data, r_nom, templates, self.max_effects, progress=self._say, look_for_lag=False)
         chosen, hold, cases = refit_determined(again.fitter, again.chosen, self._say)
         if not chosen.names or chosen.score >= final.score or chosen.problem is None:
             return final, selection
@@ -398,15 +397,7 @@ class Discovery:
                    if k not in ("axis", "side", "edge_m")}
         current, edge = final, None
         for _ in range(3):
-            assert current.problem is not None
-            forces = current.problem.forces(current.fit.theta)
-            others = sum((data.concat(per_segment) for i, per_segment in enumerate(forces) if i != index),
-                         np.zeros((data.n_samples, 3)))
-            # the suction of the whole plane at the current parameters, against what the data show of it
-            wall = plain_wall(current.fit.effects[index])
-            plane = EffectFit(data, [wall], r_nom, fitter.terms, ["plane"])
-            suction = data.concat(plane.forces(wall.param_vector())[0])
-            found = find_edge(data, suction, data.concat(r_nom) - others)
+            found = find_edge(data, *self._suctions(data, r_nom, fitter, current, index))
             if found is None or (edge is not None and (found["axis"], found["side"]) != (edge["axis"], edge["side"])):
                 break
             if edge is not None and abs(found["edge_m"] - edge["edge_m"]) < 0.01:
@@ -432,11 +423,7 @@ class Discovery:
         assert isinstance(placed, BoundedWall)
         self._say(f"wall suction on one side of an edge: {placed.describe()}")
         # the share of the suction the data show on each side, at the edge placed and the parameters fitted there
-        wall = plain_wall(current.fit.effects[index])
-        suction = data.concat(EffectFit(data, [wall], r_nom, fitter.terms, ["plane"]).forces(wall.param_vector())[0])
-        forces = current.problem.forces(current.fit.theta) if current.problem is not None else []
-        others = sum((data.concat(f) for i, f in enumerate(forces) if i != index), np.zeros((data.n_samples, 3)))
-        edge = {**edge, **side_gains(data, suction, data.concat(r_nom) - others, edge)}
+        edge = {**edge, **side_gains(data, *self._suctions(data, r_nom, fitter, current, index), edge)}
         if current.score >= base.score - parameter_price(data.effective_samples()):
             self._hold = {(key if effect_name(k) == "wall_suction" else k): v for k, v in self._hold.items()}
             return base
@@ -451,6 +438,19 @@ class Discovery:
             "price); the model file's wall_suction acts on the whole plane the scene gives: limit the wall in your "
             "simulation to where it is")
         return current
+
+    @staticmethod
+    def _suctions(data: FlightData, r_nom: list[np.ndarray], fitter, current: Candidate, index: int
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """The suction of the whole plane at ``current``'s parameters of its wall (entry ``index``), and what the data
+        show of it (the nominal residual less the other effects' forces), both smoothed, all segments ``(N, 3)``."""
+        assert current.problem is not None
+        forces = current.problem.forces(current.fit.theta)
+        others = sum((data.concat(per_segment) for i, per_segment in enumerate(forces) if i != index),
+                     np.zeros((data.n_samples, 3)))
+        wall = plain_wall(current.fit.effects[index])
+        plane = EffectFit(data, [wall], r_nom, fitter.terms, ["plane"])
+        return data.concat(plane.forces(wall.param_vector())[0]), data.concat(r_nom) - others
 
     def _placed_edge(self, fitter, current: Candidate, index: int, options: dict, edge: dict
                      ) -> tuple[Candidate, dict]:

@@ -109,14 +109,19 @@ def test_a_force_growing_with_height_is_not_written_as_a_thrust_scale(tmp_path):
     assert slope * np.sign(shape["direction_world"][2]) == pytest.approx(-0.8, rel=0.2)
 
 
+def _wall_ending_at_1_2_m(tmp_path, name, truth, seed, flight, **kwargs):
+    """Discovery fitted on a 60 s flight near a wall whose suction is ``truth`` and which ends 1.2 m up."""
+    path = _log(tmp_path, name, {"suction": (truth["k_s"], truth["d_thr"]), "wall_top": 1.2}, seed, flight=flight,
+                wall=True, duration=60.0, gains=NEAR_WALL, **kwargs)
+    return Discovery().fit(read_log(path))
+
+
 def test_a_wall_that_ends_is_found_and_the_suction_fitted_on_the_wall(tmp_path):
     """The scene says an infinite plane; the wall ends 1.2 m up and the flight goes above it. As a plane, k_s came out
     45 % high; fitted on the wall's side of the edge the data show, both parameters are within 10 %."""
     flight = {"centre": (0.25, 0.0, 1.2), "amplitude": (0.09, 0.5, 0.45), "period": (7.0, 9.0, 5.0)}
     truth = {"k_s": 5.5, "d_thr": 0.125}
-    path = _log(tmp_path, "edge", {"suction": (5.5, 0.125), "wall_top": 1.2}, 306, flight=flight, wall=True,
-                duration=60.0, gains=NEAR_WALL)
-    found = Discovery().fit(read_log(path))
+    found = _wall_ending_at_1_2_m(tmp_path, "edge", truth, 306, flight)
     assert found.names_ == ["wall_suction"]
     assert max(relative_errors(found.effects_[0].values, truth)) < 0.1
     assert found.wall_edge_["axis"] == "height" and found.wall_edge_["side"] == "below"
@@ -132,9 +137,7 @@ def test_a_brisk_climb_past_the_top_of_a_wall_places_the_edge_and_keeps_the_plai
     placed by the bounded wall's held-out score, where the plain form is scored again."""
     flight = {"centre": (0.25, 0.0, 1.2), "amplitude": (0.095, 0.43, 0.48), "period": (7.4, 10.5, 3.8)}
     truth = {"k_s": 6.5, "d_thr": 0.124}
-    path = _log(tmp_path, "brisk", {"suction": (6.5, 0.124), "wall_top": 1.2}, 310, flight=flight, wall=True,
-                duration=60.0, rate=200.0, gains=NEAR_WALL)
-    found = Discovery().fit(read_log(path))
+    found = _wall_ending_at_1_2_m(tmp_path, "brisk", truth, 310, flight, rate=200.0)
     assert found.names_ == ["wall_suction"]
     assert max(relative_errors(found.effects_[0].values, truth)) < 0.05
     assert found.model_.to_dict()["effects"][0]["options"] == {"thrust_scaling": False}
@@ -146,9 +149,7 @@ def test_a_wall_that_ends_is_found_when_the_plane_alone_would_make_the_gap_worse
     nominal model's and was never chosen, so its edge was never looked for and nothing was found."""
     flight = {"centre": (0.25, 0.0, 1.2), "amplitude": (0.085, 0.56, 0.387), "period": (6.755, 10.425, 6.424)}
     truth = {"k_s": 6.3114, "d_thr": 0.12247}
-    path = _log(tmp_path, "half", {"suction": (6.3114, 0.12247), "wall_top": 1.2}, 7461, flight=flight, wall=True,
-                duration=60.0, gains=NEAR_WALL)
-    found = Discovery().fit(read_log(path))
+    found = _wall_ending_at_1_2_m(tmp_path, "half", truth, 7461, flight)
     assert found.names_ == ["wall_suction"]
     assert max(relative_errors(found.effects_[0].values, truth)) < 0.1
     assert found.wall_edge_["edge_m"] == pytest.approx(1.2, abs=0.03)
