@@ -17,8 +17,9 @@ how far the rotors were from the logged thrust at the segment's first sample. A 
 mid-air, or a stretch after a gap, need not start settled; taking it so biased a 30 ms lag
 10-25 % low on the second simulator's logs, which start with the rotors at hover under a
 command far from it. A cross-validation fold whose held-out rows a start error reaches takes
-that start settled (:meth:`LagTerm.fold_fixed`), so the errors never fit held-out rows. The
-lag is kept when it lowers the held-out score and its 95 % interval is away from zero and
+that start settled (:meth:`LagTerm.fold_fixed`), so the errors never fit held-out rows, and
+the rows a start error reaches are left out when the lag is scored (:meth:`LagTerm.clear_of_starts`).
+The lag is kept when it lowers the held-out score and its 95 % interval is away from zero and
 from :data:`MAX_FITTED_S`, however small its force: a determined lag biases what is fitted
 next to it (see :func:`discovery.selection._motor_lag`). A lag so found is not an
 aerodynamic effect: it becomes the vehicle's ``motor_time_constant``, the logs are prepared
@@ -121,6 +122,19 @@ class LagTerm:
             column = self.at_rows(s, theta)[1][:, :, 1 + s]
             share = SEEN_SHARE**2 * float(np.sum(column**2))
             out[1 + s] = float(np.sum(column[held_rows] ** 2)) >= share or float(np.sum(column[train_rows] ** 2)) <= share
+        return out
+
+    def clear_of_starts(self, theta: np.ndarray) -> list[np.ndarray]:
+        """Per segment, a mask of the fit rows that no start error reaches: rows each carrying less than
+        :data:`SEEN_SHARE` of its effect (rms), as :meth:`fold_fixed` counts them."""
+        out = []
+        for s, rows in enumerate(self._rows):
+            clear = np.ones(len(rows), dtype=bool)
+            if self.size > 1:
+                column = self.at_rows(s, theta)[1][:, :, 1 + s]
+                energy = np.sum(column**2, axis=1)
+                clear = energy < SEEN_SHARE**2 * float(np.sum(energy))
+            out.append(clear)
         return out
 
     def _steps(self, s: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from discovery.fitting import EffectFit
 from discovery.flight_log import read_log
-from discovery.motor_lag import MotorLag
+from discovery.motor_lag import LagTerm, MotorLag
 from discovery.residuals import prepare
 from discovery.workflow import Discovery
 from tests.discovery_support import relative_errors
@@ -123,6 +124,56 @@ def test_a_motor_lag_under_a_thrust_scale(tmp_path):
     assert found.names_ == ["thrust_scale"]
     assert found.effects_[0].values["scale"][0] == pytest.approx(0.85, rel=0.02)
     assert found.motor_lag_["kept"] and found.motor_lag_["time_constant_s"] == pytest.approx(0.03, rel=0.07)
+
+
+@pytest.mark.parametrize("seed", [320, 322])
+def test_a_lag_that_leaves_the_vertical_drag_right_is_kept_when_the_score_cannot_pay_for_it(seed, tmp_path):
+    """A climb and descent at one pace, about as fast as the other axes' sweeps: the lag and the vertical drag
+    look alike, so the lag lowers the held-out score by little. Seed 320: scored on every row, the first second
+    (the rotors start at hover, far from their command, and a held-out fold takes them settled) made the lag
+    score worse than none. Seed 322: scored past the starts it predicts held-out rows 6.5 % better, one price
+    short, at 5.6 standard errors. Both were dropped and D[2] written 23-25 % low."""
+    D = [0.25, 0.26, 0.38]
+    rows = fly({"linear_drag": D}, centre=(1.5, 0.0, 1.0), amplitude=(0.8, 0.7, 0.4), period=(4.2, 5.7, 4.1),
+               duration=60.0, rate_hz=50.0, seed=seed, motor_lag=0.03)
+    found = _discover(write(rows, tmp_path / "lag.csv", seed=seed, wall=False))
+    lag = found.motor_lag_
+    assert found.names_ == ["linear_drag"] and lag["kept"] and lag["explained"] > 0
+    assert abs(lag["time_constant_s"] - 0.03) < 3 * lag["std_s"]
+    assert found.model_.vehicle.motor_time_constant == lag["time_constant_s"]
+    assert max(relative_errors(found.effects_[0].values, {"D": D})) < 0.05
+    assert not any("motor_lag" in limit["effects"] for limit in found.limits_)
+
+
+def test_no_lag_is_kept_beside_a_structure_the_library_cannot_describe(tmp_path):
+    """A force growing with height (outside the library) flown with a 30 ms lag: next to the 1 N it leaves, a
+    lag fitted at 58 +- 11 ms predicted the rows past the starts better and was kept when the relaxed rules
+    applied there too; it is not kept, and the residual is reported as living against height."""
+    import dataclasses
+
+    from tests.independent_cases import cases, fly_case
+
+    case = dataclasses.replace(next(c for c in cases(330) if c.name == "height_force"), motor_lag=0.03)
+    found = _discover(fly_case(case, 330, 100.0, tmp_path))
+    assert found.names_ == [] and not found.motor_lag_["kept"]
+    assert found.model_.vehicle.motor_time_constant == 0.0
+    assert found.unexplained_ is not None and found.unexplained_["where"]["regressor"] == "height above ground"
+
+
+def test_the_rows_a_start_error_reaches_are_the_first_of_its_segment(tmp_path):
+    """The rows left out when a lag is scored: those within half a smoothing window plus a few time constants of
+    a segment's first sample, and no others."""
+    rows = fly({}, centre=(1.5, 0.0, 1.0), amplitude=(1.0, 1.0, 0.4), period=(5.0, 6.0, 3.0), duration=40.0,
+               rate_hz=100.0, seed=7, motor_lag=0.04)
+    data = prepare([read_log(write(rows[:1500] + rows[1550:], tmp_path / "gap.csv", seed=7, wall=False))])
+    term = LagTerm(data, MotorLag(segments=2))
+    clear = term.clear_of_starts(np.array([0.04, 4.8, -1.0]))
+    for seg, mask in zip(data.segments, clear):
+        t = seg.t[seg.fit_rows] - seg.t[0]
+        assert not mask[0] and mask[t > 0.5 + 10 * 0.04].all()
+        assert t[~mask].max() < 0.5 + 10 * 0.04
+    # without start errors every row is scored
+    assert all(mask.all() for mask in LagTerm(data, MotorLag()).clear_of_starts(np.array([0.04])))
 
 
 def test_a_start_error_is_never_fitted_to_the_rows_it_is_scored_on(tmp_path):
