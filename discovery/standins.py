@@ -19,9 +19,10 @@ piecewise-linear in time (knots :data:`TIME_KNOT_S` apart, without its mean: a s
 is the same at every time). Then the held-out scores decide, every parameter priced
 (:func:`test_effect`): when the description in the effect's place scores better, and the
 effect does not pay for itself next to it, the effect only stood in for that residual. It is
-not written, and the report names it. Parsimony protects a real effect: a thrust scale that
-leaves nothing but noise beats any shape-free description of the same force (which on a
-sinusoidal flight is also a function of the position). An effect that stays but whose
+not written, and the report names it. Against a state the description is tried at several
+resolutions (:data:`STATE_KNOTS`) and the best-scoring one is weighed. Parsimony protects a real
+effect: a thrust scale that leaves nothing but noise beats any shape-free description of the same
+force (which on a sinusoidal flight is also a function of the position). An effect that stays but whose
 parameter moves by more than :data:`PROXY_SHARE` and two standard errors next to the
 description acts partly as a proxy: the report gives both values.
 """
@@ -37,12 +38,13 @@ from discovery.regressors import Regressor
 from discovery.residuals import FlightData
 from wall_env.effects import Effect, FlightContext, Parameter, Wrench
 
-__all__ = ["Structure", "StructureTerm", "structure_for", "test_effect", "own_quantity", "TIME_KNOT_S", "PROXY_SHARE",
+__all__ = ["Structure", "StructureTerm", "structure_for", "structures_for", "test_effect", "own_quantity", "TIME_KNOT_S", "PROXY_SHARE",
            "OWN_QUANTITIES"]
 
 TIME_KNOT_S = 2.0  # s between knots of a slowly varying structure in time
 PROXY_SHARE = 0.05  # a kept parameter moving by more than this share (and two standard errors) acts partly as a proxy
 _KNOTS = 8
+STATE_KNOTS = (2, 4, _KNOTS)  # knots of the piecewise-linear descriptions against a state
 #: the regressors an effect's own form depends on: a structure along them is that effect's shape, not a stand-in's
 OWN_QUANTITIES = {
     "wall_suction": ("distance to wall",),
@@ -116,9 +118,19 @@ def _split(data: FlightData, values: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def structure_for(data: FlightData, where: dict, candidates: list[Regressor]) -> Structure | None:
+def structures_for(data: FlightData, where: dict, candidates: list[Regressor]) -> list[Structure]:
+    """The :class:`Structure` descriptions of the residual that lives where ``where`` says, coarsest first: against a
+    state, piecewise linear with each of :data:`STATE_KNOTS` knots (a force linear in height is two knots, and eight
+    priced it out of replacing the thrust map that stood in for it); elsewhere the one of :func:`structure_for`."""
+    counts = STATE_KNOTS if where["lives_in"] == "states" else (_KNOTS,)
+    found = (structure_for(data, where, candidates, knots=k) for k in counts)
+    return [s for s in found if s is not None]
+
+
+def structure_for(data: FlightData, where: dict, candidates: list[Regressor], knots: int = _KNOTS) -> Structure | None:
     """A :class:`Structure` for the residual that lives where ``where`` (:func:`discovery.unexplained.where_it_lives`)
-    says, or None when it lives nowhere in particular."""
+    says (against a state, piecewise linear with ``knots`` knots at its quantiles), or None when it lives nowhere in
+    particular."""
     lives = where["lives_in"]
     if lives == "states":
         reg = next((r for r in candidates if r.name == where["states"].get("regressor")), None)
@@ -126,17 +138,17 @@ def structure_for(data: FlightData, where: dict, candidates: list[Regressor]) ->
             return None
         x = reg.values
         finite = np.isfinite(x)
-        knots = np.unique(np.quantile(x[finite], np.linspace(0.0, 1.0, _KNOTS)))
-        if len(knots) < 2:
+        at = np.unique(np.quantile(x[finite], np.linspace(0.0, 1.0, knots)))
+        if len(at) < 2:
             return None
-        hats = np.zeros((len(x), len(knots)))
-        hats[finite] = np.column_stack([np.interp(x[finite], knots, np.eye(len(knots))[k]) for k in range(len(knots))])
-        columns, label = hats, f"piecewise linear in {reg.name}"
+        hats = np.zeros((len(x), len(at)))
+        hats[finite] = np.column_stack([np.interp(x[finite], at, np.eye(len(at))[k]) for k in range(len(at))])
+        columns, label = hats, f"piecewise linear in {reg.name} ({len(at)} knots)"
         zero = _vanishes_at(reg, x[finite])
         if zero is not None:  # the description is zero where such a force vanishes: no level of its own
-            at = np.array([np.interp(zero, knots, np.eye(len(knots))[k]) for k in range(len(knots))])
-            columns = (hats - at) * finite[:, None]
-            columns = np.delete(columns, int(np.argmax(at)), axis=1)
+            there = np.array([np.interp(zero, at, np.eye(len(at))[k]) for k in range(len(at))])
+            columns = (hats - there) * finite[:, None]
+            columns = np.delete(columns, int(np.argmax(there)), axis=1)
             label += f", zero at {zero:.3g} {reg.unit}"
     elif lives == "position":
         cells = where["position"]["cells"]
@@ -161,8 +173,8 @@ def structure_for(data: FlightData, where: dict, candidates: list[Regressor]) ->
     elif lives == "time (slow)":
         blocks = []
         for seg in data.segments:
-            knots = np.arange(seg.t[0], seg.t[-1] + TIME_KNOT_S, TIME_KNOT_S)
-            blocks.append(np.column_stack([np.interp(seg.t, knots, np.eye(len(knots))[k]) for k in range(len(knots))]))
+            times = np.arange(seg.t[0], seg.t[-1] + TIME_KNOT_S, TIME_KNOT_S)
+            blocks.append(np.column_stack([np.interp(seg.t, times, np.eye(len(times))[k]) for k in range(len(times))]))
         width = sum(b.shape[1] for b in blocks)
         columns = np.zeros((data.n_samples, width))
         row = col = 0
@@ -208,18 +220,22 @@ def own_quantity(effect: Effect, where: dict) -> bool:
     return where["lives_in"] == "states" and any(q in (where["states"].get("regressor") or "") for q in own)
 
 
-def test_effect(fitter: Fitter, final: Candidate, index: int, structure: Structure, where: dict, price: float,
+def test_effect(fitter: Fitter, final: Candidate, index: int, structures: list[Structure], where: dict, price: float,
                 hold: dict[str, dict[int, float]]) -> tuple[dict | None, list[dict]]:
-    """Effect ``index`` of the kept set ``final`` against ``structure``, on held-out data (the fitter's scores):
-    a stand-in record when the structure in its place scores better and the effect does not pay next to it,
-    else the parameters the structure moves (proxies)."""
+    """Effect ``index`` of the kept set ``final`` against the one of ``structures`` that scores best in its place,
+    on held-out data (the fitter's scores): a stand-in record when that structure in its place scores better and
+    the effect does not pay next to it, else the parameters the structure moves (proxies)."""
     keys = list(final.names)
     key = keys[index]
-    label = f"structure: {structure.option_values['label']}"
-    fitter.add(label, structure)
     others = [k for k in keys if k != key]
     previous = final.previous()
-    replaced = fitter.candidate(others + [label], previous=previous, hold={k: v for k, v in hold.items() if k in others})
+    tried = []
+    for structure in structures:
+        label = f"structure: {structure.option_values['label']}"
+        fitter.add(label, structure)
+        tried.append((fitter.candidate(others + [label], previous=previous,
+                                       hold={k: v for k, v in hold.items() if k in others}), label, structure))
+    replaced, label, structure = min(tried, key=lambda t: t[0].score)
     joint = fitter.candidate(keys + [label], previous=previous, hold=hold)
     effect = final.fit.effects[index]
     if replaced.score < final.score and joint.score > replaced.score - price:

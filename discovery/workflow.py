@@ -67,7 +67,7 @@ from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
 from discovery.selection import MIN_WEIGHT_SHARE, Selection, effect_name, fit_only, forward_selection, parameter_price
-from discovery.standins import own_quantity, structure_for, test_effect
+from discovery.standins import OWN_QUANTITIES, own_quantity, structures_for, test_effect
 from discovery.thrust_map import ThrustMap, written_effects
 from discovery.unexplained import is_unexplained, where_it_lives
 from discovery.wall_extent import BoundedWall, find_edge, plain_wall, side_gains
@@ -253,10 +253,11 @@ class Discovery:
         final = self._never_worse(data, r_nom, self._wall_edge(data, r_nom, final, selection, excluded), selection)
         self._finish(data, r_nom, final, selection)
         # a kept effect that only stands in for a structure the library cannot describe is not written as physics;
-        # asked only when something is left: a one-parameter effect that leaves nothing but noise is the simpler
-        # account of its residual than any shape-free description (on a sinusoidal flight a thrust scale's force
-        # is also a function of the position)
-        if final.names and self.unexplained_ is not None:
+        # asked when something is left, or when a quantity no kept effect depends on describes the nominal gap as
+        # well as they do: otherwise an effect that leaves nothing but noise is the simpler account of its residual
+        # than any shape-free description (on a sinusoidal flight a thrust scale's force is also a function of the
+        # position)
+        if final.names and (self.unexplained_ is not None or self._rival_quantity() is not None):
             kept = self._without_stand_ins(data, r_nom, final, selection)
             final = self._never_worse(data, r_nom, kept, selection)
             if final is not kept:
@@ -542,11 +543,11 @@ class Discovery:
                 where = where_it_lives(data, residual, self.regressors_, self.noise_, self.unexplained_threshold)
                 if own_quantity(final.fit.effects[i], where):
                     continue
-                structure = structure_for(data, where, self.regressors_)
-                if structure is None:
+                structures = structures_for(data, where, self.regressors_)
+                if not structures:
                     continue
                 self._say(f"asking whether {key} only stands in for a residual that {where['lives_in']} describes")
-                standin, proxies = test_effect(fitter, final, i, structure, where,
+                standin, proxies = test_effect(fitter, final, i, structures, where,
                                                parameter_price(data.effective_samples()), self._hold)
                 if standin is not None:
                     found.append(standin)
@@ -572,6 +573,25 @@ class Discovery:
         if changed:
             self._finish(data, r_nom, final, selection)
         return final
+
+    def _rival_quantity(self) -> dict | None:
+        """The quantity no kept effect's form depends on whose shape-free map explains the nominal held-out gap
+        best, when it leaves no more than the kept effects do (``{"regressor", "explained_fraction"}``); None
+        otherwise, or when every kept effect is steady (a steady force is a function of any quantity).
+
+        The kept effects may then stand in for a force of that quantity: climbing slowly and evenly, the thrust
+        follows the height, and an affine thrust map with a vertical steady force left only noise of a force
+        growing with height, which the map of the height explained a little better still."""
+        own = {q for e in self.effects_ for q in OWN_QUANTITIES.get(e.name, ())}
+        if not own:
+            return None
+        before, after = _rms(self.residual_before_), _rms(self.residual_after_)
+        for entry in self.where_before_.get("all_explained", []):
+            name = entry["regressor"] or ""
+            if name in ("everywhere", "time") or any(q in name for q in own):
+                continue
+            return entry if before * math.sqrt(max(1.0 - entry["explained_fraction"], 0.0)) <= after else None
+        return None
 
     def _unexplained(self, data: FlightData) -> dict | None:
         """What the final model leaves that is more than noise, and where it lives (:mod:`discovery.unexplained`)."""

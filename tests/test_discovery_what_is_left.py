@@ -109,6 +109,24 @@ def test_a_force_growing_with_height_is_not_written_as_a_thrust_scale(tmp_path):
     assert slope * np.sign(shape["direction_world"][2]) == pytest.approx(-0.8, rel=0.2)
 
 
+def test_a_force_growing_with_height_that_a_thrust_map_leaves_as_noise_is_still_not_written(tmp_path):
+    """-0.65 N per metre of height on a brisker, shallower climb: the thrust follows the height so closely that an
+    affine thrust map (scale 1.26, offset -3.5 N) with a vertical steady force left only noise, and nothing was
+    asked. A map of the height explains the nominal gap as well as they do, so they are asked; a force linear in
+    height (two knots) in their place scores better, where eight knots were priced out."""
+    flight = {"centre": (1.5, 0.0, 1.2), "amplitude": (0.9, 1.1, 0.36), "period": (7.5, 6.7, 4.0)}
+    found = Discovery().fit(read_log(_log(tmp_path, "height", {"height_force": 0.65}, 350, flight=flight,
+                                          duration=60.0)))
+    assert found.names_ == [] and found.model_.effects == []
+    assert {s["effect"] for s in found.stand_ins_} == {"thrust_scale", "constant_force"}
+    assert any("piecewise linear in height above ground (2 knots)" in s["reason"] for s in found.stand_ins_)
+    left = found.unexplained_
+    assert left["lives_in"] == "states" and left["where"]["regressor"] == "height above ground"
+    shape = left["shape"]
+    slope = (shape["force_N_at_knots"][-1] - shape["force_N_at_knots"][0]) / (shape["knots"][-1] - shape["knots"][0])
+    assert slope * np.sign(shape["direction_world"][2]) == pytest.approx(-0.65, rel=0.2)
+
+
 def _wall_ending_at_1_2_m(tmp_path, name, truth, seed, flight, **kwargs):
     """Discovery fitted on a 60 s flight near a wall whose suction is ``truth`` and which ends 1.2 m up."""
     path = _log(tmp_path, name, {"suction": (truth["k_s"], truth["d_thr"]), "wall_top": 1.2}, seed, flight=flight,
