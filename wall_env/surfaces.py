@@ -321,7 +321,10 @@ class SurfaceQuery:
             self._bullet = None
 
     def __del__(self) -> None:
-        self.close()
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - at interpreter exit even the builtins close() names may be gone
+            pass
 
     def __getstate__(self):
         raise TypeError("a SurfaceQuery holds a PyBullet client and is not picklable; make one from the scene")
