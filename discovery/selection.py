@@ -303,7 +303,8 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
     "force_rms_N", "kept", "reason", "determined", "moves"}`` (``interval_95_share``: the 95 %
     interval's half-width as a share of the time constant; ``to_narrow``: the manoeuvre that
     determines it better, when that share is above :data:`LAG_INTERVAL_SHARE`, else None;
-    ``explained``: the share of the nominal held-out energy it adds to the chosen effects;
+    ``explained``: the share of the nominal held-out energy it adds to the chosen effects, on the
+    rows past the starts;
     ``force_rms_N``: the force it accounts for; ``determined``: its interval is away from zero
     and its bounds; ``moves``: :func:`_moves`).
 
