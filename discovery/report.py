@@ -67,7 +67,8 @@ Keys:
     standard error, why, what was done (nulled or the effect left out of the model
     file) and the manoeuvre that would determine it.
 ``alike``
-    candidates the flight could not tell apart, with the manoeuvre that would.
+    candidates the flight could not tell apart, with the manoeuvre that would (and ``why_chosen``
+    when the one chosen did not score best).
 ``notes``
     what was left out of the logs and why (e.g. time resting on the ground).
 ``limits``
@@ -273,7 +274,9 @@ def format_summary(report: dict[str, Any]) -> str:
                      f"{_fmt(case['std'])}: {case['reason']}; {case['action']}; to determine: {case['manoeuvre']}")
     for pair in report.get("alike") or []:
         lines.append(f"cannot tell {pair['chosen']} from {pair['alike']} in this flight (scores within one "
-                     f"parameter's price); to tell them apart: {pair['manoeuvre']}")
+                     f"parameter's price)" + (f"; {pair['chosen']} was chosen: {pair['why_chosen']}"
+                                              if pair.get("why_chosen") else "")
+                     + f"; to tell them apart: {pair['manoeuvre']}")
     for note in report.get("notes") or []:
         if not note.startswith("likely sidecar error"):
             lines.append(f"note: {note}")

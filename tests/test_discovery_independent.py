@@ -176,6 +176,22 @@ def test_the_rows_a_start_error_reaches_are_the_first_of_its_segment(tmp_path):
     assert all(mask.all() for mask in LagTerm(data, MotorLag()).clear_of_starts(np.array([0.04])))
 
 
+def test_a_thrust_map_that_ties_with_the_ceiling_on_a_steady_thrust_gives_way_to_it(tmp_path):
+    """Hovering under a ceiling with a 0.5 N rms random force: the stiff loop's thrust answers it, and an affine
+    thrust map of scale 0.32 scored 2.0 better than the ceiling effect (a price is 15), so it was named. On a flight
+    whose thrust varies by less than 10 % the tie goes to the ceiling effect, and the report says why."""
+    from discovery.report import format_summary
+    from tests.independent_cases import CEILING
+
+    rows = fly({"ceiling": (0.08, 0.0)}, duration=60.0, rate_hz=100.0, seed=370, force_noise=0.5, **CEILING)
+    found = _discover(write(rows, tmp_path / "ceiling.csv", seed=370, wall=False, ceiling=True))
+    assert found.names_ == ["ceiling_effect"]
+    assert found.effects_[0].values["radius"] == pytest.approx(0.08, rel=0.05)
+    pair = next(a for a in found.selection_.alike if a["alike"] == "thrust_scale")
+    assert pair["chosen"] == "ceiling_effect" and pair["score_difference"] < 0 and "stiff loop" in pair["why_chosen"]
+    assert "ceiling_effect was chosen: the thrust varied too little" in format_summary(found.report())
+
+
 def test_a_start_error_is_never_fitted_to_the_rows_it_is_scored_on(tmp_path):
     """Cross-validation holds a segment's start error settled (0) in the folds whose held-out rows it reaches, and
     fits it in the others."""

@@ -174,14 +174,21 @@ def test_a_wall_that_ends_is_found_when_the_plane_alone_would_make_the_gap_worse
     assert found.gap_after_["force_rms_N"] < 0.3 * found.gap_before_["force_rms_N"]
 
 
-def test_a_thrust_map_at_its_bound_gives_way_to_the_ceiling_effect_it_displaced(tmp_path):
+def test_a_thrust_map_at_its_bound_gives_way_to_the_ceiling_effect_it_displaced(tmp_path, monkeypatch):
     """Slow under a ceiling the thrust is nearly a function of the distance to it, and an affine thrust map scored
     like the ceiling effect with a scale at its bound (0.30). Left out for that, it left nothing; chosen again
-    without it, the ceiling effect explains the gap down to the noise."""
+    without it, the ceiling effect explains the gap down to the noise. On this steady thrust the tie now goes to
+    the ceiling effect in the first place, so the second choice is checked with that tie-break turned off."""
+    import discovery.selection
+
     flight = {"centre": (1.5, 0.0, CEILING_Z - 0.13), "amplitude": (0.58, 0.5, 0.042), "period": (8.7, 9.2, 4.9),
               "gains": {"kp": [6.0, 6.0, 40.0], "kd": [4.0, 4.0, 12.0], "ki": [1.0, 1.0, 20.0]}}
     path = _log(tmp_path, "under", {"ceiling": (0.072, 0.0)}, 313, flight=flight, duration=60.0, rate=200.0,
                 ceiling=True)
+    tied = Discovery().fit(read_log(path))
+    assert tied.names_ == ["ceiling_effect"]
+    assert any(a["alike"] == "thrust_scale" and a.get("why_chosen") for a in tied.selection_.alike)
+    monkeypatch.setattr(discovery.selection, "_closed_loop_tie", lambda scored, price, steady: (scored[0], False))
     found = Discovery().fit(read_log(path))
     assert found.names_ == ["ceiling_effect"]
     assert max(relative_errors(found.effects_[0].values, {"radius": 0.072})) < 0.1
