@@ -261,9 +261,10 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
             break
         scored.sort(key=lambda c: c.score)
         best, tie = _closed_loop_tie(scored, price, steady)
-        for other in scored:
-            if other is not best and abs(other.score - best.score) < price \
-                    and effect_name(other.names[-1]) != effect_name(best.names[-1]):
+        for other in scored:  # one record per pair: an effect's plain and fuller forms may both be within a price
+            pair = (effect_name(best.names[-1]), effect_name(other.names[-1]))
+            if other is not best and abs(other.score - best.score) < price and pair[0] != pair[1] \
+                    and not any((a["chosen"], a["alike"]) == pair for a in alike):
                 alike.append({"chosen": effect_name(best.names[-1]), "alike": effect_name(other.names[-1]),
                               "score_difference": round(other.score - best.score, 2),
                               "explained_chosen": round((current.mse - best.mse) / nominal.mse, 4),
@@ -300,7 +301,7 @@ CLOSED_LOOP_TIE = ("the thrust varied too little to tell a thrust map by, and un
 def _closed_loop_tie(scored: list[Candidate], price: float, steady: bool) -> tuple[Candidate, bool]:
     """The candidate a round chooses from ``scored`` (best score first): the best, except that on a flight whose
     thrust is ``steady`` (varies by less than :data:`~discovery.coverage.THRUST_VARIATION`) a thrust scale within
-    one parameter's price of another effect gives way to it; and whether it did.
+    one parameter's price of another effect with no more parameters gives way to it; and whether it did.
 
     Under a stiff altitude loop the thrust's changes answer every vertical force, the random one included, so a
     thrust map with a scale below 1 fits part of that force, and the bias goes its way on every flight: hovering
@@ -315,7 +316,8 @@ def _closed_loop_tie(scored: list[Candidate], price: float, steady: bool) -> tup
     for other in scored[1:]:
         if other.score - best.score >= price:
             break
-        if effect_name(other.names[-1]) != "thrust_scale":
+        # parsimony is not overridden: a steady force (three parameters) tied with a thrust scale (one) stays behind
+        if effect_name(other.names[-1]) != "thrust_scale" and other.n_params <= best.n_params:
             return other, True
     return best, False
 
