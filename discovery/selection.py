@@ -293,7 +293,7 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms, form_limits, lag, fitter)
 
 
-#: why a surface effect within one price of a thrust map was chosen over it (:func:`_closed_loop_tie`)
+#: why an effect within one price of a thrust map was chosen over it on a steady thrust (:func:`_closed_loop_tie`)
 CLOSED_LOOP_TIE = ("the thrust varied too little to tell a thrust map by, and under a stiff loop its small changes "
                    "answer the random forces on the vehicle, which a thrust map then fits: the tie goes to the other")
 
