@@ -29,7 +29,7 @@ from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 
 __all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "resting_on_ground", "ground_contact", "flight_limits", "nearest_wall",
-           "scene_problems"]
+           "thrust_variation", "scene_problems"]
 
 REST_THRUST_SHARE = 0.5  # of the weight
 NOT_FALLING = 0.25  # of g: a vertical acceleration above -NOT_FALLING g with thrust below half the weight is held
@@ -105,6 +105,12 @@ def nearest_wall(regressors: list) -> float | None:
     return min(distances) if distances else float("inf")
 
 
+def thrust_variation(thrust: np.ndarray) -> float:
+    """How much the thrust varied over the flight: its standard deviation over its mean. Below
+    :data:`THRUST_VARIATION` a thrust scale and a vertical steady force look alike."""
+    return float(np.std(thrust) / max(np.mean(thrust), 1e-9))
+
+
 def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
     """Effects this flight cannot determine, each ``{"effects", "reason", "manoeuvre"}``."""
     values = {r.name: r.values for r in regressors}
@@ -145,7 +151,7 @@ def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
                                   f"along body {axis}",
                         "manoeuvre": f"fly back and forth along body {axis} at 1 m/s or more"})
     if len(thrust):
-        variation = float(np.std(thrust) / max(np.mean(thrust), 1e-9))
+        variation = thrust_variation(thrust)
         if variation < THRUST_VARIATION:
             out.append({"effects": ["thrust_scale", "constant_force"],
                         "reason": f"the thrust varies by only {100 * variation:.0f} % (std/mean): a thrust scale "

@@ -59,7 +59,7 @@ from typing import Any
 import numpy as np
 from scipy.special import chdtri
 
-from discovery.coverage import THRUST_VARIATION
+from discovery.coverage import THRUST_VARIATION, thrust_variation
 from discovery.fitting import Candidate, Fitter, applicable
 from discovery.layout import ParameterLayout
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG, LagTerm, MotorLag
@@ -225,7 +225,7 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
 
     floor = (MIN_WEIGHT_SHARE * data.weight) ** 2  # N^2
     thrust = data.concat([seg.thrust for seg in data.segments])
-    steady = len(thrust) > 0 and float(np.std(thrust)) < THRUST_VARIATION * float(np.mean(thrust))
+    steady = len(thrust) > 0 and thrust_variation(thrust) < THRUST_VARIATION
 
     def material(better: Candidate, worse: Candidate) -> bool:
         """``better`` explains at least MIN_SHARE of the force-gap energy that ``worse`` leaves, and at least
@@ -265,7 +265,7 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
             pair = (effect_name(best.names[-1]), effect_name(other.names[-1]))
             if other is not best and abs(other.score - best.score) < price and pair[0] != pair[1] \
                     and not any((a["chosen"], a["alike"]) == pair for a in alike):
-                alike.append({"chosen": effect_name(best.names[-1]), "alike": effect_name(other.names[-1]),
+                alike.append({"chosen": pair[0], "alike": pair[1],
                               "score_difference": round(other.score - best.score, 2),
                               "explained_chosen": round((current.mse - best.mse) / nominal.mse, 4),
                               "explained_alike": round((current.mse - other.mse) / nominal.mse, 4),

@@ -38,8 +38,8 @@ from discovery.regressors import Regressor
 from discovery.residuals import FlightData
 from wall_env.effects import Effect, FlightContext, Parameter, Wrench
 
-__all__ = ["Structure", "StructureTerm", "structure_for", "structures_for", "test_effect", "own_quantity", "TIME_KNOT_S", "PROXY_SHARE",
-           "OWN_QUANTITIES"]
+__all__ = ["Structure", "StructureTerm", "structure_for", "structures_for", "test_effect", "own_quantity", "depends_on",
+           "TIME_KNOT_S", "PROXY_SHARE", "OWN_QUANTITIES"]
 
 TIME_KNOT_S = 2.0  # s between knots of a slowly varying structure in time
 PROXY_SHARE = 0.05  # a kept parameter moving by more than this share (and two standard errors) acts partly as a proxy
@@ -213,11 +213,16 @@ def _vanishes_at(reg: Regressor, values: np.ndarray) -> float | None:
     return None
 
 
+def depends_on(effect_name: str, regressor: str) -> bool:
+    """Whether the form of the effect ``effect_name`` depends on the regressor named ``regressor``
+    (:data:`OWN_QUANTITIES`)."""
+    return any(q in regressor for q in OWN_QUANTITIES.get(effect_name, ()))
+
+
 def own_quantity(effect: Effect, where: dict) -> bool:
     """Whether the residual lives along ``effect``'s own quantity: the structure's regressor is one ``effect``'s form
     depends on."""
-    own = OWN_QUANTITIES.get(effect.name, ())
-    return where["lives_in"] == "states" and any(q in (where["states"].get("regressor") or "") for q in own)
+    return where["lives_in"] == "states" and depends_on(effect.name, where["states"].get("regressor") or "")
 
 
 def test_effect(fitter: Fitter, final: Candidate, index: int, structures: list[Structure], where: dict, price: float,

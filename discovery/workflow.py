@@ -67,7 +67,7 @@ from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
 from discovery.selection import MIN_WEIGHT_SHARE, Selection, effect_name, fit_only, forward_selection, parameter_price
-from discovery.standins import OWN_QUANTITIES, own_quantity, structures_for, test_effect
+from discovery.standins import OWN_QUANTITIES, depends_on, own_quantity, structures_for, test_effect
 from discovery.thrust_map import ThrustMap, written_effects
 from discovery.unexplained import is_unexplained, where_it_lives
 from discovery.wall_extent import BoundedWall, find_edge, plain_wall, side_gains
@@ -582,13 +582,13 @@ class Discovery:
         The kept effects may then stand in for a force of that quantity: climbing slowly and evenly, the thrust
         follows the height, and an affine thrust map with a vertical steady force left only noise of a force
         growing with height, which the map of the height explained a little better still."""
-        own = {q for e in self.effects_ for q in OWN_QUANTITIES.get(e.name, ())}
-        if not own:
+        varying = [e.name for e in self.effects_ if e.name in OWN_QUANTITIES]
+        if not varying:
             return None
         before, after = _rms(self.residual_before_), _rms(self.residual_after_)
         for entry in self.where_before_.get("all_explained", []):
             name = entry["regressor"] or ""
-            if name in ("everywhere", "time") or any(q in name for q in own):
+            if name in ("everywhere", "time") or any(depends_on(e, name) for e in varying):
                 continue
             return entry if before * math.sqrt(max(1.0 - entry["explained_fraction"], 0.0)) <= after else None
         return None
