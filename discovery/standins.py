@@ -39,12 +39,14 @@ from discovery.residuals import FlightData
 from wall_env.effects import Effect, FlightContext, Parameter, Wrench
 
 __all__ = ["Structure", "StructureTerm", "structure_for", "structures_for", "test_effect", "own_quantity", "depends_on",
-           "TIME_KNOT_S", "PROXY_SHARE", "OWN_QUANTITIES"]
+           "TIME_KNOT_S", "PROXY_SHARE", "OWN_QUANTITIES", "PLACE_QUANTITIES"]
 
 TIME_KNOT_S = 2.0  # s between knots of a slowly varying structure in time
 PROXY_SHARE = 0.05  # a kept parameter moving by more than this share (and two standard errors) acts partly as a proxy
 _KNOTS = 8
 STATE_KNOTS = (2, 4, _KNOTS)  # knots of the piecewise-linear descriptions against a state
+#: the regressors that say where the vehicle is (a residual living in the position map may depend on one of them)
+PLACE_QUANTITIES = ("height above ground", "distance to ceiling", "nearest rotor distance to wall")
 #: the regressors an effect's own form depends on: a structure along them is that effect's shape, not a stand-in's
 OWN_QUANTITIES = {
     "wall_suction": ("distance to wall",),
@@ -118,12 +120,25 @@ def _split(data: FlightData, values: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def structures_for(data: FlightData, where: dict, candidates: list[Regressor]) -> list[Structure]:
+def structures_for(data: FlightData, where: dict, candidates: list[Regressor], effect: str = "") -> list[Structure]:
     """The :class:`Structure` descriptions of the residual that lives where ``where`` says, coarsest first: against a
     state, piecewise linear with each of :data:`STATE_KNOTS` knots (a force linear in height is two knots, and eight
-    priced it out of replacing the thrust map that stood in for it); elsewhere the one of :func:`structure_for`."""
-    counts = STATE_KNOTS if where["lives_in"] == "states" else (_KNOTS,)
-    found = (structure_for(data, where, candidates, knots=k) for k in counts)
+    priced it out of replacing the thrust map that stood in for it); elsewhere the one of :func:`structure_for`.
+
+    A residual that lives in the position map may vary along one of its coordinates only: it is also described
+    against each distance to a surface (:data:`PLACE_QUANTITIES`) that the form of ``effect`` (the one asked about)
+    does not depend on, as a state. A force growing with height, which a heavier vehicle's climb and descent left
+    in the map's cells once its thrust map was taken out, took twenty-odd cell means to describe there, and the
+    thrust map that stood in for it was written; two knots in height describe it."""
+    if where["lives_in"] == "states":
+        found = [structure_for(data, where, candidates, knots=k) for k in STATE_KNOTS]
+    else:
+        found = [structure_for(data, where, candidates)]
+    if where["lives_in"] == "position":
+        for reg in candidates:
+            if reg.name.startswith(PLACE_QUANTITIES) and not depends_on(effect, reg.name):
+                along = {**where, "lives_in": "states", "states": {"regressor": reg.name}}
+                found += [structure_for(data, along, candidates, knots=k) for k in STATE_KNOTS]
     return [s for s in found if s is not None]
 
 

@@ -262,6 +262,10 @@ class Discovery:
             final = self._never_worse(data, r_nom, kept, selection)
             if final is not kept:
                 self._finish(data, r_nom, final, selection)
+        # a parameter nulled in the model file is said of the effects written; what was left out is said of any
+        written = {e.name for e in final.fit.effects}
+        self.undetermined_ = [c for c in self.undetermined_
+                              if c["effect"] in written or c["action"].startswith("effect left out")]
         self.notes_ += self.written_notes_
         self._wind_limit(data, final)
         # the proof against the user's nominal model
@@ -543,7 +547,7 @@ class Discovery:
                 where = where_it_lives(data, residual, self.regressors_, self.noise_, self.unexplained_threshold)
                 if own_quantity(final.fit.effects[i], where):
                     continue
-                structures = structures_for(data, where, self.regressors_)
+                structures = structures_for(data, where, self.regressors_, final.fit.effects[i].name)
                 if not structures:
                     continue
                 self._say(f"asking whether {key} only stands in for a residual that {where['lives_in']} describes")
