@@ -35,16 +35,23 @@ _SPECTRUM_S = 20.0  # s per Welch segment of the smoothed residual (0.05 Hz reso
 
 
 def step_residual(seg: Segment) -> np.ndarray:
-    """The per-step quantity ``e`` ``(n - 1, 3)`` whose matched smoothing is the segment's measured force."""
+    """The per-step quantity ``e`` ``(n - 1, 3)`` whose matched smoothing is the segment's measured force.
+
+    On a log with a step longer than the rest (a sample the logger dropped) each step's impulse is taken over the
+    median period, ``(m dv_j + (m g e3 - T_j z_j) dt_j) / dt``: the velocity noise stays differenced white (its
+    increments still sum to the end values' difference), where dividing each increment by its own step left a
+    white part that raised the floor threefold with one sample in twenty dropped."""
     dt = np.diff(seg.t)
+    period = float(np.median(dt))
     mass = seg.states.mass
     z_steps = step_average_samples(seg.states.R_body_to_world[:, :, 2])
     if seg.a_raw is not None:  # a measured acceleration: its step average
         acceleration = mass * step_average_samples(seg.a_raw)
-    else:
-        assert seg.v_raw is not None, "a segment keeps its logged velocity or acceleration"
-        acceleration = mass * np.diff(seg.v_raw, axis=0) / dt[:, None]
-    return acceleration + mass * seg.gravity * np.array([0.0, 0.0, 1.0]) - seg.thrust[:-1, None] * z_steps
+        return acceleration + mass * seg.gravity * np.array([0.0, 0.0, 1.0]) - seg.thrust[:-1, None] * z_steps
+    assert seg.v_raw is not None, "a segment keeps its logged velocity or acceleration"
+    impulse = mass * np.diff(seg.v_raw, axis=0) \
+        + (mass * seg.gravity * np.array([0.0, 0.0, 1.0]) - seg.thrust[:-1, None] * z_steps) * dt[:, None]
+    return impulse / period
 
 
 def _welch(x: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
@@ -92,8 +99,13 @@ def _refine_peak(data: FlightData, residual: np.ndarray, peak_hz: float, resolut
 
 
 def _kernel_gains(seg: Segment) -> tuple[float, float]:
-    """``sum w^2`` and ``sum (w_j - w_{j+1})^2`` of the segment's interior step weights (zero-padded)."""
+    """``sum w^2`` and ``sum (w_j - w_{j+1})^2`` of the weights the segment's interior kernel gives the impulses of
+    :func:`step_residual` (zero-padded): the step weights times the median period over each step's (on a log with
+    a dropped sample, the step weights jump where a step is longer; the impulses' weights do not)."""
     w = seg.step_weights()
+    if not seg.kernel.uniform:
+        steps = seg.kernel.start[seg.n // 2] + np.arange(len(w))
+        w = w * seg.dt / seg.kernel.dt[steps]
     padded = np.concatenate([[0.0], w, [0.0]])
     return float(np.sum(w**2)), float(np.sum(np.diff(padded) ** 2))
 

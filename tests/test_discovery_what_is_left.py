@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from discovery.flight_log import read_log
-from discovery.noise import FLOOR_FACTOR, _fit_levels
+from discovery.noise import FLOOR_FACTOR, _fit_levels, noise_floor
 from discovery.report import format_summary
+from discovery.residuals import prepare
 from discovery.workflow import Discovery
 from tests.discovery_support import relative_errors
 from tests.independent_sim import CEILING_Z, GRAVITY, MASS, NEAR_WALL, fly, write
@@ -51,6 +52,22 @@ def test_a_clean_log_is_within_its_own_noise_floor(tmp_path):
     # the floor is measured from the log's high-frequency residual; a perfect model leaves about that much
     assert 0.75 < found.gap_after_["force_rms_N"] / floor < 1.25
     assert "within noise" in format_summary(found.report())
+
+
+def test_a_log_with_dropped_samples_keeps_the_noise_floor_of_the_full_log(tmp_path):
+    """One sample in twenty dropped at random (a logger that loses some): each velocity increment divided by its own
+    step left part of the velocity noise white, and the floor came out three to five times the full log's, above
+    what a perfect model leaves (a residual 0.04 N beside a floor of 0.12 N would be called noise)."""
+    rows = fly({}, duration=40.0, rate_hz=100.0, seed=380, **OPEN)
+    full = prepare([read_log(write(rows, tmp_path / "full.csv", seed=380, wall=False))])
+    keep = np.random.default_rng(381).random(len(rows)) >= 0.05
+    dropped = read_log(write([r for r, k in zip(rows, keep) if k], tmp_path / "dropped.csv", seed=380, wall=False))
+    assert max(np.diff(dropped.t)) > 1.5 * np.median(np.diff(dropped.t))  # longer steps inside the segments
+    found = Discovery().fit(dropped)
+    floor = found.noise_["floor_N"]
+    assert floor == pytest.approx(noise_floor(full)["floor_N"], rel=0.25)
+    assert found.names_ == [] and found.unexplained_ is None
+    assert 0.75 < found.gap_after_["force_rms_N"] / floor < 1.5
 
 
 def test_a_zero_mean_periodic_gust_is_reported_as_varying_in_time_at_its_frequency(tmp_path, capsys):
