@@ -23,8 +23,8 @@ so are the rotor thrusts (what the rotors produced over that step).
 Other columns are allowed and ignored. Without ``ax, ay, az`` the acceleration is
 derived from the velocity by a smoothing differentiator
 (:mod:`discovery.differentiation`). Sample rates from 50 Hz to 1 kHz are supported;
-a gap longer than :data:`GAP_FACTOR` median sample periods splits the log into
-segments that are processed separately.
+a gap longer than :data:`GAP_FACTOR` median sample periods (more than two samples
+missing) splits the log into segments that are processed separately.
 
 The JSON file::
 
@@ -253,9 +253,11 @@ class FlightLog:
         return quaternions_to_matrices(self.q_body_to_world)
 
     def segments(self) -> list[slice]:
-        """Contiguous stretches without gaps longer than :data:`GAP_FACTOR` median periods."""
+        """Contiguous stretches without gaps longer than :data:`GAP_FACTOR` median periods, counted in whole periods:
+        a step of exactly three (two samples dropped) came out a rounding error longer and split a 250 Hz log with
+        one sample in twenty dropped into 36 pieces, whose ends left a quadratic drag 11 % off."""
         dt = np.diff(self.t)
-        breaks = np.flatnonzero(dt > GAP_FACTOR * np.median(dt)) + 1
+        breaks = np.flatnonzero(dt > (GAP_FACTOR + 0.5) * np.median(dt)) + 1
         edges = [0, *breaks.tolist(), self.n_samples]
         return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 

@@ -138,6 +138,17 @@ def test_a_gap_splits_the_log_into_segments(tmp_path):
     assert [(s.start, s.stop) for s in segments] == [(0, 100), (100, 220)]
 
 
+def test_two_dropped_samples_do_not_split_the_log_and_three_do(tmp_path):
+    """Steps are counted in whole periods: two samples missing at 250 Hz make a step a rounding error longer than
+    three periods, which split the log; three missing are a gap."""
+    log = synthetic_log(n=2000, rate_hz=250.0)
+    keep = np.ones(log.n_samples, dtype=bool)
+    keep[[700, 701, 1100, 1101, 1300, 1301, 1302]] = False
+    dropped = log.select(keep)
+    assert max(np.diff(dropped.t)) / np.median(np.diff(dropped.t)) == pytest.approx(4.0)
+    assert [(s.start, s.stop) for s in dropped.segments()] == [(0, 1296), (1296, 1993)]
+
+
 def test_writer_refuses_to_replace_files_unless_asked(good_log):
     with pytest.raises(FileExistsError, match="flight.csv exists"):
         write_log(synthetic_log(), good_log)
