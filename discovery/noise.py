@@ -44,18 +44,15 @@ def step_residual(seg: Segment) -> np.ndarray:
     (the smoothed measured force) is taken at each step's own length, ``F (dt_j / dt - 1)`` less: a steady 2.4 N
     (an affine thrust map's offset) scaled by the longer steps alone was spikes of white power eight times the
     noise's."""
-    dt = np.diff(seg.t)
-    period = float(np.median(dt))
     mass = seg.states.mass
     z_steps = step_average_samples(seg.states.R_body_to_world[:, :, 2])
+    weight_less_thrust = mass * seg.gravity * np.array([0.0, 0.0, 1.0]) - seg.thrust[:-1, None] * z_steps
     if seg.a_raw is not None:  # a measured acceleration: its step average
-        acceleration = mass * step_average_samples(seg.a_raw)
-        return acceleration + mass * seg.gravity * np.array([0.0, 0.0, 1.0]) - seg.thrust[:-1, None] * z_steps
+        return mass * step_average_samples(seg.a_raw) + weight_less_thrust
     assert seg.v_raw is not None, "a segment keeps its logged velocity or acceleration"
-    impulse = mass * np.diff(seg.v_raw, axis=0) \
-        + (mass * seg.gravity * np.array([0.0, 0.0, 1.0]) - seg.thrust[:-1, None] * z_steps) * dt[:, None]
+    stretch = (np.diff(seg.t) / seg.dt)[:, None]  # each step over the median period
     slow = step_average_samples(seg.measured_force)
-    return impulse / period - slow * (dt / period - 1.0)[:, None]
+    return mass * np.diff(seg.v_raw, axis=0) / seg.dt + weight_less_thrust * stretch - slow * (stretch - 1.0)
 
 
 def _welch(x: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
@@ -104,12 +101,8 @@ def _refine_peak(data: FlightData, residual: np.ndarray, peak_hz: float, resolut
 
 def _kernel_gains(seg: Segment) -> tuple[float, float]:
     """``sum w^2`` and ``sum (w_j - w_{j+1})^2`` of the weights the segment's interior kernel gives the impulses of
-    :func:`step_residual` (zero-padded): the step weights times the median period over each step's (on a log with
-    a dropped sample, the step weights jump where a step is longer; the impulses' weights do not)."""
-    w = seg.step_weights()
-    if not seg.kernel.uniform:
-        steps = seg.kernel.start[seg.n // 2] + np.arange(len(w))
-        w = w * seg.dt / seg.kernel.dt[steps]
+    :func:`step_residual` (:meth:`~discovery.residuals.Segment.impulse_weights`, zero-padded)."""
+    w = seg.impulse_weights()
     padded = np.concatenate([[0.0], w, [0.0]])
     return float(np.sum(w**2)), float(np.sum(np.diff(padded) ** 2))
 

@@ -102,7 +102,22 @@ class Segment:
 
     def step_weights(self) -> np.ndarray:
         """The matched kernel's weights over the steps of a centred window (``K`` of :mod:`discovery.residuals`)."""
-        return self.kernel.interior["step"] if self.kernel.uniform else self.kernel.edge["step"][self.n // 2]
+        return self.kernel.interior["step"] if self.kernel.uniform else self.kernel.edge["step"][self._centre_row]
+
+    def impulse_weights(self) -> np.ndarray:
+        """The same window's weights over each step's impulse taken over the median period
+        (:func:`discovery.noise.step_residual`): the step weights times the median period over each step's own,
+        so that a longer step (a dropped sample) does not make them jump."""
+        w = self.step_weights()
+        if self.kernel.uniform:
+            return w
+        steps = self.kernel.start[self._centre_row] + np.arange(len(w))
+        return w * self.dt / self.kernel.dt[steps]
+
+    @property
+    def _centre_row(self) -> int:
+        """The sample whose window stands for the segment's interior when the times are not uniform."""
+        return self.n // 2
 
     def effective_samples(self) -> float:
         """Independent residual values per axis in this segment: ``n sum(w^2)``, ``w`` the kernel's step weights
