@@ -3,10 +3,12 @@
 Two checks that make a report say *why* it could or could not say more:
 
 - :func:`resting_on_ground`: samples where the thrust carries less than half the
-  weight and yet the vehicle does not fall (vertical acceleration above -g/4, while
-  a free vehicle would fall at more than g/2). Something else holds it up (the
-  ground, a hand, a stand); that force is not aerodynamic, so these samples are left
-  out of the fits and the report says how long they lasted.
+  weight and yet the vehicle falls slower than that thrust lets it: its vertical
+  acceleration is more than g/4 above the thrust's (both smoothed alike), while a free
+  vehicle would fall at more than g/2. Something else holds it up (the ground, a hand,
+  a stand); that force is not aerodynamic, so these samples are left out of the fits
+  and the report says how long they lasted. A vehicle that drops the thrust to start a
+  quick descent is not held: it falls as fast as its thrust says.
 - :func:`ground_contact`: the rotors spinning up on the ground before a take-off and
   the touchdown before they stop, next to a rest: near the height the vehicle rested
   at, with the thrust below the weight. The ground still carries part of the weight
@@ -32,7 +34,7 @@ __all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "resting_on_ground", "ground_c
            "thrust_variation", "scene_problems"]
 
 REST_THRUST_SHARE = 0.5  # of the weight
-NOT_FALLING = 0.25  # of g: a vertical acceleration above -NOT_FALLING g with thrust below half the weight is held
+NOT_FALLING = 0.25  # of g: falling this much slower than the thrust lets it, with thrust below half the weight, is held
 NEAR_SURFACE = 0.3  # m: wall suction, ground and ceiling effects act within about this distance
 SPEED_FOR_DRAG = 0.5  # m/s rms along a body axis to determine drag along it
 THRUST_VARIATION = 0.1  # relative standard deviation of the thrust that separates a thrust scale from a steady force
@@ -44,10 +46,13 @@ def resting_on_ground(log: FlightLog) -> np.ndarray:
     vertical = thrust * log.R_body_to_world[:, 2, 2]
     weight = log.vehicle.mass * log.gravity
     dt = float(np.median(np.diff(log.t)))
-    v_smooth = moving_average(log.v_world[:, 2], max(1, int(round(0.5 / dt))))
-    a_z = np.gradient(v_smooth, log.t)
-    # with the thrust carrying a share s < 1/2 of the weight a free vehicle falls at (1 - s) g > g / 2
-    not_falling = a_z > -NOT_FALLING * log.gravity
+    window = max(1, int(round(0.5 / dt)))
+    a_z = np.gradient(moving_average(log.v_world[:, 2], window), log.t)
+    # with the thrust carrying a share s < 1/2 of the weight a free vehicle falls at (1 - s) g > g / 2; the
+    # thrust's own acceleration is smoothed like the measured one, so that a short, deliberate drop of the
+    # thrust in the air (a quick descent) does not look held up under the smoothing
+    a_z_thrust = moving_average(vertical / log.vehicle.mass - log.gravity, window)
+    not_falling = a_z > a_z_thrust + NOT_FALLING * log.gravity
     return (vertical < REST_THRUST_SHARE * weight) & not_falling
 
 
