@@ -130,10 +130,11 @@ def _effects_for_flight(case: Case, seed: int) -> dict[str, Any]:
     return effects
 
 
-def fly_case(case: Case, seed: int, rate: float, folder: Path) -> Path:
-    """Fly ``case`` and write its log into ``folder``; returns the CSV path."""
+def fly_case(case: Case, seed: int, rate: float, folder: Path, waypoints: float = 0.0) -> Path:
+    """Fly ``case`` and write its log into ``folder``; returns the CSV path. ``waypoints``: see
+    :func:`tests.independent_sim.fly` (0: the sinusoidal survey)."""
     rows = fly(_effects_for_flight(case, seed), duration=case.duration, rate_hz=rate, seed=seed,
-               motor_lag=case.motor_lag, takeoff=case.takeoff, **case.flight)
+               motor_lag=case.motor_lag, takeoff=case.takeoff, waypoints=waypoints, **case.flight)
     return write(rows, folder / f"{case.name}_{seed}.csv", seed=seed, **case.write)
 
 
@@ -221,13 +222,13 @@ def winds_case(seed: int) -> tuple[dict, list[dict]]:
     return {"C": C}, [{"w": w} for w in winds]
 
 
-def run_winds(seed: int, rate: float, folder: Path, n_flights: int = 3) -> dict:
+def run_winds(seed: int, rate: float, folder: Path, n_flights: int = 3, waypoints: float = 0.0) -> dict:
     """Fly the winds case, discover across its flights, and judge the shared drag and each wind."""
     shared, flights = winds_case(seed)
     paths = []
     for i, flight in enumerate(flights[:n_flights]):
         rows = fly({"quadratic_drag": (shared["C"], flight["w"])}, duration=60.0, rate_hz=rate, seed=seed * 10 + i,
-                   **FAST)
+                   waypoints=waypoints, **FAST)
         paths.append(write(rows, folder / f"winds_{seed}_{i}.csv", seed=seed * 10 + i, wall=False))
     report = discover(paths, folder / f"winds_{seed}")
     effect = next((e for e in report["effects"] if e["name"] == "quadratic_drag"), None)
@@ -257,6 +258,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--long", action="store_true", help="also the 360 s distance-offset logs")
     parser.add_argument("--json", default=None)
     parser.add_argument("--keep", default=None, help="folder to keep the logs and reports in")
+    parser.add_argument("--waypoints", type=float, default=0.0,
+                        help="fly every survey between waypoints (tanh sharpness, 2 is brisk; 0: sinusoids)")
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     wanted = None if args.cases is None else {c.strip() for c in args.cases.split(",")}
@@ -273,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
                 rate = case.rate or RATES[index % len(RATES)]
                 index += 1
                 started = time.perf_counter()
-                path = fly_case(case, seed, rate, folder)
+                path = fly_case(case, seed, rate, folder, args.waypoints)
                 report = discover([path], folder / f"{case.name}_{seed}")
                 record = {"seed": seed, "rate_hz": rate, **judge(case, report),
                           "wall_s": round(time.perf_counter() - started, 1)}
@@ -288,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
             if wanted is None or "winds" in wanted:
                 rate = RATES[index % len(RATES)]
                 index += 1
-                record = {"seed": seed, "rate_hz": rate, **run_winds(seed, rate, folder)}
+                record = {"seed": seed, "rate_hz": rate, **run_winds(seed, rate, folder, waypoints=args.waypoints)}
                 records.append(record)
                 shown = {k: v for k, v in record.items() if k not in ("seed", "rate_hz")}
                 print(f"{'winds':20s} seed {seed} {rate:5.0f} Hz {json.dumps(shown)}", flush=True)

@@ -159,7 +159,7 @@ DESCEND_S, SPIN_DOWN_S = 5.0, 2.0
 
 def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: float, seed: int,
         force_noise: float = 0.25, motor_lag: float = 0.0, takeoff: bool = False,
-        gains: dict | None = None) -> list[tuple]:
+        gains: dict | None = None, waypoints: float = 0.0) -> list[tuple]:
     """Track ``centre + amplitude sin(2 pi t / period + phase)``; rows ``(t, p, v, q, w, T_cmd, w_cmd)``
     at ``rate_hz``, each with the command applied from then on; the rotors lag it by ``motor_lag`` s.
     ``gains`` (``kp``, ``kd``, ``ki``, each per world axis) replace the position loop's defaults: near a wall or a
@@ -167,7 +167,10 @@ def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: floa
 
     With ``takeoff`` the flight starts and ends resting on the ground below the survey's start: the rotors
     stopped, then spinning up on the ground to 90 % of the weight, a climb to the survey, ``duration`` s of
-    survey, a descent onto the ground, and the rotors spinning down and stopped again."""
+    survey, a descent onto the ground, and the rotors spinning down and stopped again.
+
+    With ``waypoints`` > 0 the survey holds near ``centre +- amplitude`` and moves briskly between them: the sine is
+    replaced by ``tanh(k sin) / tanh(k)`` with ``k = waypoints`` (2: accelerations near 3.3 times the sine's)."""
     rng = np.random.default_rng(seed)
     centre, amplitude, period = (np.asarray(x, dtype=float) for x in (centre, amplitude, period))
     phase = np.array([0.0, 1.0, 2.0])
@@ -178,7 +181,13 @@ def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: floa
 
     def survey(t):
         s, c = np.sin(omega_ref * t + phase), np.cos(omega_ref * t + phase)
-        return centre + amplitude * s, amplitude * omega_ref * c, -amplitude * omega_ref**2 * s
+        if not waypoints:
+            return centre + amplitude * s, amplitude * omega_ref * c, -amplitude * omega_ref**2 * s
+        k = waypoints  # x = tanh(u) / tanh(k), u = k sin: its first and second derivatives by the chain rule
+        u, du, ddu = k * s, k * omega_ref * c, -k * omega_ref**2 * s
+        x = np.tanh(u)
+        slope = (1.0 - x**2) / math.tanh(k)
+        return centre + amplitude * x / math.tanh(k), amplitude * slope * du, amplitude * slope * (ddu - 2 * x * du**2)
 
     ground_point = survey(0.0)[0].copy()
     ground_point[2] = REST_HEIGHT
