@@ -214,14 +214,16 @@ def open_cases(candidate: Candidate, hold: dict[str, dict[int, float]]) -> list[
     return out
 
 
-def refit_determined(fitter: Fitter | None, chosen: Candidate, say: Callable[[str], None] | None = None
+def refit_determined(fitter: Fitter | None, chosen: Candidate, say: Callable[[str], None] | None = None,
+                     hold: dict[str, dict[int, float]] | None = None
                      ) -> tuple[Candidate, dict[str, dict[int, float]], list[Undetermined]]:
     """Only what the flight determined, fitted again: undetermined entries held at their null value and effects
     whose main parameter is undetermined dropped, the rest refitted and scored again by ``fitter``
-    (:class:`~discovery.fitting.Fitter`), until nothing more is undetermined. Returns the final candidate set,
-    the entries held (``{key: {entry: value}}``) and every case found on the way."""
+    (:class:`~discovery.fitting.Fitter`), until nothing more is undetermined. ``hold``: entries ``chosen`` was
+    fitted with held already (kept held). Returns the final candidate set, the entries held
+    (``{key: {entry: value}}``) and every case found on the way."""
     current, found = chosen, []
-    hold: dict[str, dict[int, float]] = {}
+    hold = {k: dict(v) for k, v in (hold or {}).items()}
     for _ in range(len(chosen.names) + 2):
         cases = open_cases(current, hold)
         if not cases or fitter is None:

@@ -282,8 +282,7 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
         if in_wind is not current:  # the wind may leave a companion nothing to explain (a thrust scale of 0.9999)
             current, dropped = _backward(fitter, in_wind, material)
             removed += dropped
-    explained = _sequential_explained(fitter, current, nominal)
-    explained = {effect_name(k): v for k, v in explained.items()}
+    explained = sequential_explained(fitter, current, nominal)
     chosen_names = {effect_name(k) for k in current.names}
     alike = [a for a in alike if a["chosen"] in chosen_names]
     forms = [{"effect": effect_name(k), "form": k, **({"chosen_first_as": swaps[k]} if k in swaps else {})}
@@ -573,13 +572,15 @@ def _backward(fitter: Fitter, current: Candidate, material) -> tuple[Candidate, 
     return current, removed
 
 
-def _sequential_explained(fitter: Fitter, chosen: Candidate, nominal: Candidate) -> dict[str, float]:
-    """Share of the nominal held-out residual energy each effect explains, in the order of addition."""
+def sequential_explained(fitter: Fitter, chosen: Candidate, nominal: Candidate,
+                         hold: dict[str, dict[int, float]] | None = None) -> dict[str, float]:
+    """Share of the nominal held-out residual energy each effect of ``chosen`` explains, in the order of addition
+    (``hold``: entries held at a value, by key); keyed by effect name."""
     out = {}
     previous = nominal
     for i, name in enumerate(chosen.names):
-        step = fitter.candidate(chosen.names[: i + 1], previous=chosen.previous())
-        out[name] = (previous.mse - step.mse) / nominal.mse if nominal.mse > 0 else 0.0
+        step = fitter.candidate(chosen.names[: i + 1], previous=chosen.previous(), hold=hold)
+        out[effect_name(name)] = (previous.mse - step.mse) / nominal.mse if nominal.mse > 0 else 0.0
         previous = step
     return out
 

@@ -66,7 +66,15 @@ from discovery.noise import noise_floor
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
-from discovery.selection import MIN_WEIGHT_SHARE, Selection, effect_name, fit_only, forward_selection, parameter_price
+from discovery.selection import (
+    MIN_WEIGHT_SHARE,
+    Selection,
+    effect_name,
+    fit_only,
+    forward_selection,
+    parameter_price,
+    sequential_explained,
+)
 from discovery.standins import OWN_QUANTITIES, depends_on, own_quantity, structures_for, test_effect
 from discovery.thrust_map import ThrustMap, written_effects
 from discovery.unexplained import is_unexplained, where_it_lives
@@ -496,7 +504,12 @@ class Discovery:
         left beyond the noise."""
         self.final_: Candidate | None = final
         self.motor_lag_ = selection.motor_lag
-        self.explained_fraction_ = {e.name: selection.explained.get(e.name, 0.0) for e in final.fit.effects}
+        explained = selection.explained
+        if selection.fitter is not None and final.names and list(final.names) != list(selection.chosen.names):
+            # the set written is not the one selection chose (refitted without what the flight did not determine,
+            # without stand-ins): each share is that of the set written, not of the effects it was chosen beside
+            explained = sequential_explained(selection.fitter, final, selection.nominal, self._hold)
+        self.explained_fraction_ = {e.name: explained.get(e.name, 0.0) for e in final.fit.effects}
         self.residual_after_ = data.concat(final.problem.out_of_fold(final.fit.fold_theta, r_nom)) \
             if final.problem and final.names else data.concat(r_nom)
         vehicle = data.vehicle.to_vehicle_params()
@@ -534,7 +547,7 @@ class Discovery:
         if fitter is None:
             return final
         changed = False
-        for _ in range(2):  # what is left after dropping stand-ins is asked again
+        for _ in range(3):  # what is left after dropping stand-ins (or an effect they leave undetermined) is asked again
             found: list[dict] = []
             for i, key in enumerate(final.names):
                 others = [k for k in final.names if k != key]
@@ -562,17 +575,36 @@ class Discovery:
                                   f"residual {proxy['lives_in']}, and with that described apart it would be "
                                   f"{proxy['with']:.4g} instead of {proxy['without']:.4g} (+- {proxy['std']:.2g})",
                         "manoeuvre": "fly where that residual does not, or vary that quantity independently of the "
-                                     "others"})
+                                     "others", "proxy": proxy["parameter"]})
             if not found:
                 break
             changed = True
-            self.stand_ins_ += found
             dropped = {s["key"] for s in found}
             keys = [k for k in final.names if k not in dropped]
-            self._say(f"not written as physics (stand-ins): {', '.join(sorted(dropped))}")
-            final = fitter.candidate(keys, previous=final.previous(),
-                                     hold={k: v for k, v in self._hold.items() if k in keys})
-            if not keys:
+            hold = {k: v for k, v in self._hold.items() if k in keys}
+            rest, rest_hold, undetermined = refit_determined(
+                fitter, fitter.candidate(keys, previous=final.previous(), hold=hold), self._say, hold)
+            left_out = [k for k in keys if k not in rest.names]
+            if left_out:
+                # the rest fitted without the stand-ins leaves the flight undetermined (a thrust map pinned at its
+                # lowest scale once the ceiling effect beside it is gone): the stand-ins were judged against an
+                # effect that is not written, so that effect goes and they are judged again without it
+                self._say(f"once {', '.join(sorted(dropped))} go, {', '.join(left_out)} is undetermined: left out, "
+                          "and the rest asked again")
+                self.undetermined_ += [c for c in undetermined if c["action"].startswith("effect left out")]
+                gone = {fitter.templates[k].name for k in left_out}  # what was said of their parameters goes too
+                self.limits_ = [x for x in self.limits_ if not ("proxy" in x and set(x["effects"]) <= gone)]
+                keys = [k for k in final.names if k not in left_out]
+                hold = {k: v for k, v in self._hold.items() if k in keys}
+                final, self._hold, again = refit_determined(
+                    fitter, fitter.candidate(keys, previous=final.previous(), hold=hold), self._say, hold)
+                self.undetermined_ += again
+            else:
+                self.stand_ins_ += found
+                self._say(f"not written as physics (stand-ins): {', '.join(sorted(dropped))}")
+                final, self._hold = rest, rest_hold
+                self.undetermined_ += undetermined
+            if not final.names:
                 break
         if changed:
             self._finish(data, r_nom, final, selection)

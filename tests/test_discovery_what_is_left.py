@@ -164,7 +164,9 @@ def test_a_force_growing_with_height_that_a_heavier_vehicle_leaves_in_the_positi
     assert found.names_ == [] and found.model_.effects == []
     assert "thrust_scale" in {s["effect"] for s in found.stand_ins_}
     assert any("piecewise linear in height above ground" in s["reason"] for s in found.stand_ins_)
-    assert found.undetermined_ == []  # nothing is said to be nulled in a model file that has no effect
+    # nothing is said to be nulled in a model file that has no effect: only effects said to be left out
+    assert all(c["action"].startswith("effect left out") for c in found.undetermined_)
+    assert "set to 0 in the model file" not in format_summary(found.report())
     left = found.unexplained_
     assert left["where"]["regressor"] == "height above ground"
     shape = left["shape"]
