@@ -59,11 +59,12 @@ from typing import Any
 import numpy as np
 from scipy.special import chdtri
 
-from discovery.coverage import THRUST_VARIATION, thrust_variation
+from discovery.coverage import NEAR_SURFACE, THRUST_VARIATION, thrust_variation
 from discovery.fitting import Candidate, Fitter, applicable
 from discovery.layout import ParameterLayout
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG, LagTerm, MotorLag
 from discovery.noise import noise_floor
+from discovery.regressors import regressors
 from discovery.residuals import FlightData
 from discovery.thrust_map import make_candidate
 from discovery.unexplained import is_unexplained
@@ -215,6 +216,9 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     ``look_for_lag``, a motor lag fitted next to the chosen effects (:attr:`Selection.motor_lag`)."""
     base = {e.name: e for e in candidates if applicable(e, data)}
     templates = _with_variants(base, VARIANTS if variants is None else variants)
+    thrust = data.concat([seg.thrust for seg in data.segments])
+    steady = len(thrust) > 0 and thrust_variation(thrust) < THRUST_VARIATION
+    steady_limits = _steady_thrust_forms(templates, data, thrust) if steady else []
     n_eff = effective_samples(data)
     price = parameter_price(n_eff)
     fitter = make_fitter(data, r_nom, templates, n_eff)
@@ -224,8 +228,6 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     alike: list[dict] = []
 
     floor = (MIN_WEIGHT_SHARE * data.weight) ** 2  # N^2
-    thrust = data.concat([seg.thrust for seg in data.segments])
-    steady = len(thrust) > 0 and thrust_variation(thrust) < THRUST_VARIATION
 
     def material(better: Candidate, worse: Candidate) -> bool:
         """``better`` explains at least MIN_SHARE of the force-gap energy that ``worse`` leaves, and at least
@@ -287,9 +289,46 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     alike = [a for a in alike if a["chosen"] in chosen_names]
     forms = [{"effect": effect_name(k), "form": k, **({"chosen_first_as": swaps[k]} if k in swaps else {})}
              for k in current.names]
-    form_limits = _form_limits(fitter, current)
+    form_limits = steady_limits + _form_limits(fitter, current)
     lag = _motor_lag(fitter, current, nominal, price, progress) if look_for_lag else None
     return Selection(current, nominal, steps, removed, explained, n_eff, alike, forms, form_limits, lag, fitter)
+
+
+AFFINE_MAP = variant_key("thrust_scale", {"affine": True})
+#: the regressors of the surfaces whose effects scale the thrust (ground and ceiling effects)
+THRUST_SURFACES = ("height above ground", "distance to ceiling")
+NEAR_SHARE = 0.1  # of the samples near such a surface before its pull is much of what a steady thrust answers
+
+
+def _steady_thrust_forms(templates: dict[str, Effect], data: FlightData, thrust: np.ndarray) -> list[dict]:
+    """On a flight whose thrust varies by less than :data:`~discovery.coverage.THRUST_VARIATION` and that spends
+    :data:`NEAR_SHARE` of its samples within :data:`~discovery.coverage.NEAR_SURFACE` of the ground or a ceiling
+    (not a take-off and a landing alone), take the affine thrust map's fuller form out of ``templates`` (in place)
+    and say why, as a limit.
+
+    The map's scale and offset are told apart by how the force follows the thrust's changes. A steady thrust's small
+    changes are the closed loop answering the forces on the vehicle, and near the ground or a ceiling much of that
+    force is the surface's, a function of the height the thrust then follows: hovering 13 cm under a ceiling (the
+    thrust varying by 0.5 %), a map of scale 0.38 with an 8.1 N offset fitted the ceiling's pull through the
+    thrust and scored two parameters' prices ahead of the ceiling effect. Away from surfaces the loop answers a random
+    force the thrust cannot foretell, and a hover determines the map. The plain thrust scale and the steady force
+    stay (the flight limits say they look alike)."""
+    if AFFINE_MAP not in templates:
+        return []
+    from discovery.determination import determining_manoeuvre
+
+    near = [r.name for r in regressors(data) if r.name in THRUST_SURFACES
+            and np.mean(np.nan_to_num(r.values, nan=np.inf) <= NEAR_SURFACE) >= NEAR_SHARE]
+    if not near:
+        return []
+    del templates[AFFINE_MAP]
+    surfaces = " and ".join("the ground" if n == "height above ground" else "the ceiling" for n in near)
+    return [{"effects": [AFFINE_MAP], "reason": f"not fitted: the thrust varies by only "
+                                                f"{100 * thrust_variation(thrust):.1f} % (std/mean) near {surfaces}, "
+                                                "and a thrust map's scale and offset are told apart by how the force "
+                                                "follows the thrust's changes, which there are the closed loop "
+                                                "answering the surface's pull",
+             "manoeuvre": determining_manoeuvre("thrust_scale", "offset") + ", away from the ground and ceilings"}]
 
 
 #: why an effect within one price of a thrust map was chosen over it on a steady thrust (:func:`_closed_loop_tie`)

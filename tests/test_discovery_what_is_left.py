@@ -225,13 +225,19 @@ def test_a_thrust_map_at_its_bound_gives_way_to_the_ceiling_effect_it_displaced(
     """Slow under a ceiling the thrust is nearly a function of the distance to it, and an affine thrust map scored
     like the ceiling effect with a scale at its bound (0.30). Left out for that, it left nothing; chosen again
     without it, the ceiling effect explains the gap down to the noise. On this steady thrust the tie now goes to
-    the ceiling effect in the first place, so the second choice is checked with that tie-break turned off."""
+    the ceiling effect in the first place, so the second choice is checked with that tie-break turned off. (Near a
+    surface on a steady thrust the affine map is not fitted at all now, and the ceiling effect is named at once; the
+    map is fitted here, as it is on any other flight.)"""
     import discovery.selection
 
     flight = {"centre": (1.5, 0.0, CEILING_Z - 0.13), "amplitude": (0.58, 0.5, 0.042), "period": (8.7, 9.2, 4.9),
               "gains": {"kp": [6.0, 6.0, 40.0], "kd": [4.0, 4.0, 12.0], "ki": [1.0, 1.0, 20.0]}}
     path = _log(tmp_path, "under", {"ceiling": (0.072, 0.0)}, 313, flight=flight, duration=60.0, rate=200.0,
                 ceiling=True)
+    plain = Discovery().fit(read_log(path))
+    assert plain.names_ == ["ceiling_effect"]
+    assert max(relative_errors(plain.effects_[0].values, {"radius": 0.072})) < 0.1
+    monkeypatch.setattr(discovery.selection, "_steady_thrust_forms", lambda templates, data, thrust: [])
     tied = Discovery().fit(read_log(path))
     assert tied.names_ == ["ceiling_effect"]
     assert any(a["alike"] == "thrust_scale" and a.get("why_chosen") for a in tied.selection_.alike)
