@@ -218,7 +218,9 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
     templates = _with_variants(base, VARIANTS if variants is None else variants)
     thrust = data.concat([seg.thrust for seg in data.segments])
     steady = len(thrust) > 0 and thrust_variation(thrust) < THRUST_VARIATION
-    steady_limits = _steady_thrust_forms(templates, data, thrust) if steady else []
+    steady_limits = _affine_map_confounded(data, thrust) if steady and AFFINE_MAP in templates else []
+    if steady_limits:  # on this flight the affine map would fit the surface's pull: not a candidate
+        del templates[AFFINE_MAP]
     n_eff = effective_samples(data)
     price = parameter_price(n_eff)
     fitter = make_fitter(data, r_nom, templates, n_eff)
@@ -300,11 +302,11 @@ THRUST_SURFACES = ("height above ground", "distance to ceiling")
 NEAR_SHARE = 0.1  # of the samples near such a surface before its pull is much of what a steady thrust answers
 
 
-def _steady_thrust_forms(templates: dict[str, Effect], data: FlightData, thrust: np.ndarray) -> list[dict]:
-    """On a flight whose thrust varies by less than :data:`~discovery.coverage.THRUST_VARIATION` and that spends
-    :data:`NEAR_SHARE` of its samples within :data:`~discovery.coverage.NEAR_SURFACE` of the ground or a ceiling
-    (not a take-off and a landing alone), take the affine thrust map's fuller form out of ``templates`` (in place)
-    and say why, as a limit.
+def _affine_map_confounded(data: FlightData, thrust: np.ndarray) -> list[dict]:
+    """Why the affine thrust map is not a candidate, as a limit (empty when it is), on a flight whose thrust varies
+    by less than :data:`~discovery.coverage.THRUST_VARIATION`: when the flight spends :data:`NEAR_SHARE` of its
+    samples within :data:`~discovery.coverage.NEAR_SURFACE` of the ground or a ceiling (not a take-off and a landing
+    alone).
 
     The map's scale and offset are told apart by how the force follows the thrust's changes. A steady thrust's small
     changes are the closed loop answering the forces on the vehicle, and near the ground or a ceiling much of that
@@ -313,15 +315,12 @@ def _steady_thrust_forms(templates: dict[str, Effect], data: FlightData, thrust:
     thrust and scored two parameters' prices ahead of the ceiling effect. Away from surfaces the loop answers a random
     force the thrust cannot foretell, and a hover determines the map. The plain thrust scale and the steady force
     stay (the flight limits say they look alike)."""
-    if AFFINE_MAP not in templates:
-        return []
     from discovery.determination import determining_manoeuvre
 
     near = [r.name for r in regressors(data) if r.name in THRUST_SURFACES
             and np.mean(np.nan_to_num(r.values, nan=np.inf) <= NEAR_SURFACE) >= NEAR_SHARE]
     if not near:
         return []
-    del templates[AFFINE_MAP]
     surfaces = " and ".join("the ground" if n == "height above ground" else "the ceiling" for n in near)
     return [{"effects": [AFFINE_MAP], "reason": f"not fitted: the thrust varies by only "
                                                 f"{100 * thrust_variation(thrust):.1f} % (std/mean) near {surfaces}, "

@@ -581,9 +581,7 @@ class Discovery:
             changed = True
             dropped = {s["key"] for s in found}
             keys = [k for k in final.names if k not in dropped]
-            hold = {k: v for k, v in self._hold.items() if k in keys}
-            rest, rest_hold, undetermined = refit_determined(
-                fitter, fitter.candidate(keys, previous=final.previous(), hold=hold), self._say, hold)
+            rest, rest_hold, undetermined = self._refit_kept(fitter, keys, final.previous())
             left_out = [k for k in keys if k not in rest.names]
             if left_out:
                 # the rest fitted without the stand-ins leaves the flight undetermined (a thrust map pinned at its
@@ -594,10 +592,8 @@ class Discovery:
                 self.undetermined_ += [c for c in undetermined if c["action"].startswith("effect left out")]
                 gone = {fitter.templates[k].name for k in left_out}  # what was said of their parameters goes too
                 self.limits_ = [x for x in self.limits_ if not ("proxy" in x and set(x["effects"]) <= gone)]
-                keys = [k for k in final.names if k not in left_out]
-                hold = {k: v for k, v in self._hold.items() if k in keys}
-                final, self._hold, again = refit_determined(
-                    fitter, fitter.candidate(keys, previous=final.previous(), hold=hold), self._say, hold)
+                final, self._hold, again = self._refit_kept(fitter, [k for k in final.names if k not in left_out],
+                                                            final.previous())
                 self.undetermined_ += again
             else:
                 self.stand_ins_ += found
@@ -609,6 +605,13 @@ class Discovery:
         if changed:
             self._finish(data, r_nom, final, selection)
         return final
+
+    def _refit_kept(self, fitter, keys: list[str], previous: dict[str, np.ndarray]
+                    ) -> tuple[Candidate, dict[str, dict[int, float]], list]:
+        """``keys`` fitted again with the entries they had held, and what the flight does not determine among them
+        left out (:func:`~discovery.determination.refit_determined`)."""
+        hold = {k: v for k, v in self._hold.items() if k in keys}
+        return refit_determined(fitter, fitter.candidate(keys, previous=previous, hold=hold), self._say, hold)
 
     def _rival_quantity(self) -> dict | None:
         """The quantity no kept effect's form depends on whose shape-free map explains the nominal held-out gap

@@ -192,7 +192,7 @@ def test_a_thrust_map_that_ties_with_the_ceiling_on_a_steady_thrust_gives_way_to
     assert plain.effects_[0].values["radius"] == pytest.approx(0.08, rel=0.05)
     limit = next(x for x in plain.limits_ if x["effects"] == ["thrust_scale[affine]"])
     assert "not fitted" in limit["reason"] and "near the ceiling" in limit["reason"]
-    monkeypatch.setattr(discovery.selection, "_steady_thrust_forms", lambda templates, data, thrust: [])
+    monkeypatch.setattr(discovery.selection, "_affine_map_confounded", lambda data, thrust: [])
     found = _discover(path)
     assert found.names_ == ["ceiling_effect"]
     assert found.effects_[0].values["radius"] == pytest.approx(0.08, rel=0.05)
@@ -257,7 +257,7 @@ def test_an_effect_left_undetermined_once_a_stand_in_goes_is_not_written_and_the
     import discovery.selection
     from discovery.report import format_summary
 
-    monkeypatch.setattr(discovery.selection, "_steady_thrust_forms", lambda templates, data, thrust: [])
+    monkeypatch.setattr(discovery.selection, "_affine_map_confounded", lambda data, thrust: [])
     from tests.independent_cases import CEILING
     from tests.independent_sim import CEILING_Z
 
