@@ -225,17 +225,21 @@ class EffectFit:
     any parameters and :meth:`cross_validate`. Everything here works on each segment's
     :attr:`~discovery.residuals.Segment.fit_rows`; :meth:`out_of_fold` evaluates a result on
     every sample. ``keys`` name the effects (candidate keys; default their names) and
-    ``terms`` is a term cache shared between fits (see :class:`Fitter`).
+    ``terms`` is a term cache shared between fits (see :class:`Fitter`). ``exclude`` (per segment, over the fit
+    rows) marks rows no fit uses, as where an effect's form is not trusted; they are still held out and scored.
     """
 
     def __init__(self, data: FlightData, effects: list[Effect], nominal_residual: list[np.ndarray],
-                 terms: dict[Any, Term] | None = None, keys: list[str] | None = None):
+                 terms: dict[Any, Term] | None = None, keys: list[str] | None = None,
+                 exclude: list[np.ndarray] | None = None):
         self.data = data
         self.templates = list(effects)
         self.layout = ParameterLayout(keys or [e.name for e in effects], self.templates, data.n_flights)
         self.rows = [seg.fit_rows for seg in data.segments]
         self.r_nom = [r[rows] for r, rows in zip(nominal_residual, self.rows)]
         self.folds = [seg.fold[rows] for seg, rows in zip(data.segments, self.rows)]
+        self.usable = [np.ones(len(rows), dtype=bool) for rows in self.rows] if exclude is None \
+            else [~np.asarray(x, dtype=bool) for x in exclude]
         cache = terms if terms is not None else {}
         self.terms: list[Term] = []
         for effect in effects:
@@ -341,7 +345,7 @@ class EffectFit:
             theta0: np.ndarray | None = None, held: np.ndarray | None = None) -> FitResult:
         """Fit on the fit rows selected by ``masks`` (all if None), from several starts; the entries ``held``
         (a mask over the packed vector) keep their value in ``theta0`` or the start."""
-        masks = masks or [np.ones(len(rows), dtype=bool) for rows in self.rows]
+        masks = [m & u for m, u in zip(masks, self.usable)] if masks else self.usable
         if not self.terms:  # nothing to fit: the nominal model
             rows = np.concatenate([r[m].reshape(-1) for r, m in zip(self.r_nom, masks)])
             return FitResult([], np.zeros(0), np.zeros(0), 0.5 * float(rows @ rows), rows.size, True, "no parameters",
@@ -405,7 +409,8 @@ class EffectFit:
         held_full = full.held if full.held is not None and full.held.size == self.size \
             else np.zeros(self.size, dtype=bool)
         for k in range(self.data.n_folds):
-            masks = [seg.train_mask[k][rows] for seg, rows in zip(self.data.segments, self.rows)]
+            masks = [seg.train_mask[k][rows] & usable for seg, rows, usable
+                     in zip(self.data.segments, self.rows, self.usable)]
             if self.terms and any(m.any() for m in masks):
                 # a nuisance parameter that reaches the held-out rows (a lag's start error, its segment's start
                 # held out) is not fitted: it takes its default, so no held-out row sees a value fitted to it
@@ -509,17 +514,20 @@ class Fitter:
             self._fits = {k: v for k, v in self._fits.items() if key not in k[0]}
         self.templates[key] = template
 
-    def problem(self, keys: list[str]) -> EffectFit:
-        return EffectFit(self.data, [self.templates[k] for k in keys], self.r_nom, self.terms, list(keys))
+    def problem(self, keys: list[str], exclude: list[np.ndarray] | None = None) -> EffectFit:
+        return EffectFit(self.data, [self.templates[k] for k in keys], self.r_nom, self.terms, list(keys), exclude)
 
     def candidate(self, keys: list[str], previous: dict[str, np.ndarray] | None = None,
-                  hold: dict[str, dict[int, float]] | None = None) -> Candidate:
-        """Fit, cross-validate and score the set ``keys``; ``previous`` holds starting values by key and
-        ``hold`` entries of effects' own vectors to keep at a value (``{key: {entry: value}}``)."""
+                  hold: dict[str, dict[int, float]] | None = None,
+                  exclude: list[np.ndarray] | None = None) -> Candidate:
+        """Fit, cross-validate and score the set ``keys``; ``previous`` holds starting values by key,
+        ``hold`` entries of effects' own vectors to keep at a value (``{key: {entry: value}}``) and ``exclude``
+        (per segment, over its fit rows) rows the fits leave out (see :class:`EffectFit`)."""
         hold = {k: v for k, v in (hold or {}).items() if v and k in keys}
-        cache_key = (tuple(keys), tuple(sorted((k, tuple(sorted(v.items()))) for k, v in hold.items())))
+        cache_key = (tuple(keys), tuple(sorted((k, tuple(sorted(v.items()))) for k, v in hold.items())),
+                     None if exclude is None else b"".join(np.packbits(x).tobytes() for x in exclude))
         if cache_key not in self._fits:
-            problem = self.problem(list(keys))
+            problem = self.problem(list(keys), exclude)
             start = {k: previous[k] for k in keys if previous and k in previous}
             held_mask = np.zeros(problem.size, dtype=bool)
             theta0 = None

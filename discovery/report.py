@@ -48,6 +48,10 @@ Keys:
 ``wall_edge``
     ``null``, or where wall 0 seems to end (:mod:`discovery.wall_extent`): the axis, the side the wall is on,
     the edge and the share of the fitted suction the data show on either side.
+``form_range``
+    ``null``, or, when a ground or ceiling effect was kept and the flight came nearer the surface than its
+    form is trusted (:mod:`discovery.form_range`): the share and seconds of samples set aside, the parameters
+    fitted on everything and (when ``applied``) without them, or why the fit on everything was kept.
 ``vehicle_fields``
     where each field of the model file's vehicle came from: given in the vehicle block, derived from it,
     found (a motor lag), or defaulted (the paper vehicle's value; the log says nothing about it).
@@ -157,6 +161,7 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "cancelling": found.cancelling_,
         "vehicle_fields": found.model_.vehicle_fields,
         "wall_edge": found.wall_edge_,
+        "form_range": found.form_range_,
         "left_out": found.left_out_,
         "flights": found.flights_,
         "closed_loop": closed_loop,

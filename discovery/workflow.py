@@ -31,8 +31,10 @@ One straight pipeline, each step in its own module:
    with its own wind); what the flight did not determine is nulled or left out and the rest
    **fitted again** (:mod:`discovery.determination`); effects that cancel each other are
    look-alikes and the simplest account is kept (:mod:`discovery.cancelling`); a wall that ends
-   gets its suction fitted on its side of the edge (:mod:`discovery.wall_extent`); a model whose
-   held-out gap is not smaller than the nominal model's is never written;
+   gets its suction fitted on its side of the edge (:mod:`discovery.wall_extent`); a ground or ceiling
+   effect is fitted again without the samples nearer its surface than its form is trusted, and the set
+   asked again there (:mod:`discovery.form_range`); a model whose held-out gap is not smaller than the
+   nominal model's is never written;
 8. **report**: the log's noise floor (:mod:`discovery.noise`) and what is left beyond it, with
    where it lives (:mod:`discovery.unexplained`), kept effects that only stood in for it dropped
    (:mod:`discovery.standins`), the model file (:class:`wall_env.model_file.FlightModel`), the
@@ -61,6 +63,7 @@ from discovery.determination import determining_manoeuvre, refit_determined
 from discovery.fitting import Candidate, EffectFit
 from discovery.flight_log import FlightLog
 from discovery.flights import conditions, model_on, still_air
+from discovery.form_range import fit_within_form
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG
 from discovery.noise import noise_floor
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
@@ -80,6 +83,7 @@ from discovery.thrust_map import ThrustMap, written_effects
 from discovery.unexplained import is_unexplained, where_it_lives
 from discovery.wall_extent import BoundedWall, find_edge, plain_wall, side_gains
 from wall_env.effects import EFFECTS, Effect, make_effect
+from wall_env.effects.ground import FORM_TRUSTED_FROM_RADII
 from wall_env.model_file import FlightModel
 
 __all__ = ["Discovery", "DEFAULT_WINDOW_S", "DEFAULT_BLOCK_S"]
@@ -254,6 +258,7 @@ class Discovery:
         self.noise_ = noise_floor(data)
         self.stand_ins_: list[dict] = []
         self.withheld_: dict[str, Any] | None = None
+        self.form_range_: dict[str, Any] | None = None
         final, self._hold, self.undetermined_ = refit_determined(selection.fitter, selection.chosen, self._say)
         final, selection = self._chosen_without_bounded(data, r_nom, excluded, final, selection)
         self.selection_ = selection
@@ -270,6 +275,7 @@ class Discovery:
             final = self._never_worse(data, r_nom, kept, selection)
             if final is not kept:
                 self._finish(data, r_nom, final, selection)
+        final = self._within_form(data, r_nom, final, selection)
         # a parameter nulled in the model file is said of the effects written; what was left out is said of any
         written = {e.name for e in final.fit.effects}
         self.undetermined_ = [c for c in self.undetermined_
@@ -606,6 +612,43 @@ class Discovery:
             self._finish(data, r_nom, final, selection)
         return final
 
+    def _within_form(self, data: FlightData, r_nom: list[np.ndarray], final: Candidate,
+                     selection: Selection) -> Candidate:
+        """``final`` with its ground or ceiling effect fitted where the image-rotor form is trusted
+        (:mod:`discovery.form_range`), finished again when that changed it; the report says what was set aside."""
+        if selection.fitter is None or not final.names:
+            return final
+        within, hold, self.form_range_ = fit_within_form(selection.fitter, final, self._hold, data, self.regressors_,
+                                                         selection.n_eff, self._say)
+        summary = self.form_range_
+        if summary is None:
+            return final
+        names, surfaces = ", ".join(summary["effects"]), " or ".join(summary["surfaces"])
+        aside = (f"{100 * summary['share_set_aside']:.0f} % of the samples ({summary['seconds_set_aside']:.1f} s) had "
+                 f"a rotor within {FORM_TRUSTED_FROM_RADII:g} effective radius of {surfaces}, where how the gain "
+                 "levels off is the form's guess")
+        on_all = "; ".join(f"{name} {_params_text(params)}" for name, params in summary["on_all"].items())
+        if summary["applied"]:
+            self.notes_.append(f"{names} fitted without the samples nearer {surfaces} than its form is trusted: "
+                               f"{aside}; fitted on them too it would be {on_all}")
+        else:
+            self.limits_.append({"effects": summary["effects"], "reason": f"{aside}; {summary['reason']}",
+                                 "manoeuvre": f"fly at several distances beyond one effective radius of {surfaces} "
+                                              "(about 0.1 m to 0.5 m)"})
+        for change in summary["changed"]:
+            gone = [k for k in change["from"] if k not in change["to"]]
+            came = {effect_name(k): k for k in change["to"] if k not in change["from"]}
+            said = [f"{k} in the form {came[effect_name(k)]}" if effect_name(k) in came else f"without {k}"
+                    for k in gone]
+            self.notes_.append(f"within the range the form is trusted, the model {' and '.join(said)} scores better: "
+                               f"{', '.join(gone)} only paid for itself on the samples set aside")
+        if within is final:
+            return final
+        self._hold = hold
+        final = self._never_worse(data, r_nom, within, selection)
+        self._finish(data, r_nom, final, selection)
+        return final
+
     def _refit_kept(self, fitter, keys: list[str], previous: dict[str, np.ndarray]
                     ) -> tuple[Candidate, dict[str, dict[int, float]], list]:
         """``keys`` fitted again with the entries they had held, and what the flight does not determine among them
@@ -912,6 +955,10 @@ def _written_std(written: list[Effect], fitted: list[Effect], stds: list[dict]) 
     by_name = {e.name: std for e, std in zip(fitted, stds)}
     return {e.name: {p.name: by_name[e.name][p.name] for p in e.parameters if p.name in by_name[e.name]}
             for e in written if e.name in by_name}
+
+
+def _params_text(params: dict[str, Any]) -> str:
+    return ", ".join(f"{k}={np.round(v, 4).tolist() if isinstance(v, list) else f'{v:.4g}'}" for k, v in params.items())
 
 
 def _intervals(t: np.ndarray, mask: np.ndarray) -> list[list[float]]:

@@ -34,6 +34,10 @@ def image_rotor_gain(radius: ca.SX, distance: ca.SX, offset: ca.SX | float = 0.0
     return 1.0 / (1.0 - (radius / (4.0 * h)) ** 2)
 
 
+#: effective radii (distance plus offset) from the surface out to which the form is trusted: nearer, how the gain
+#: levels off is the clamp's guess (here half the radius), not something a measured rotor need share
+FORM_TRUSTED_FROM_RADII = 1.0
+
 OFFSET = Parameter("offset", "m", 0.0, -0.05, 0.5,
                    "distance offset k2 of Sanchez-Cuevas et al. (the gain follows the distance plus this)")
 

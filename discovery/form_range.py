@@ -1,0 +1,168 @@
+"""Where a library form is trusted: a ground or ceiling effect fitted away from its surface.
+
+The image-rotor gain of the ground and ceiling effects (:func:`wall_env.effects.ground.image_rotor_gain`) grows
+without bound as a rotor nears the surface, so every model of it stops the growth somewhere. The library clamps
+the distance at half the effective radius (a gain of 4/3); a real rotor and its frame level off where their own
+shape says, and a simulator written apart may clamp elsewhere. That end of the form is a guess a log need not
+share. From :data:`~wall_env.effects.ground.FORM_TRUSTED_FROM_RADII` effective radii out the forms agree.
+
+A flight that spends time nearer lets those samples, where the gain is largest, set the parameters: flown down to
+2 cm under a ceiling whose gain levels off at 0.6 of the radius, the radius came out 7-13 % large with a spurious
+distance offset. So the parameters written come from a refit without the samples that had a rotor nearer than
+that to the surface (:func:`fit_within_form`). The range depends on the radius being fitted, so the refit is
+repeated until the samples it leaves out stop changing. The samples left out are still held out and scored: what
+the form leaves there is part of the gap after, and the report says where it lives.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from discovery.determination import open_cases
+from discovery.selection import effect_name, score
+from wall_env.effects import Effect
+from wall_env.effects.ground import FORM_TRUSTED_FROM_RADII
+
+if TYPE_CHECKING:
+    from discovery.fitting import Candidate, Fitter
+    from discovery.regressors import Regressor
+    from discovery.residuals import FlightData
+
+__all__ = ["SURFACE_DISTANCE", "MIN_FITTED_SHARE", "near_rows", "fit_within_form"]
+
+#: the regressor (the nearest rotor's distance, m) of the surface each image-rotor effect acts near
+SURFACE_DISTANCE = {"ground_effect": "height above ground", "ceiling_effect": "distance to ceiling"}
+SURFACE_NAME = {"ground_effect": "the ground", "ceiling_effect": "the ceiling"}
+#: the share of the fit rows that must stay for the refit: below it the flight lived near the surface, and the fit
+#: on all of it is kept (the report says so)
+MIN_FITTED_SHARE = 0.3
+ITERATIONS = 5  # refits at most: the range follows the radius, the radius the range
+
+
+def near_rows(data: FlightData, regressors: list[Regressor], effects: list[Effect]) -> list[np.ndarray]:
+    """Per segment, over its fit rows: the samples with a rotor nearer to a surface than its effect's form is
+    trusted (distance plus the effect's offset below :data:`FORM_TRUSTED_FROM_RADII` times its radius)."""
+    values = {r.name: r.values for r in regressors}
+    starts = np.cumsum([0] + [seg.n for seg in data.segments])
+    out = [np.zeros(len(seg.fit_rows), dtype=bool) for seg in data.segments]
+    for effect in effects:
+        name = SURFACE_DISTANCE.get(effect.name)
+        if name not in values:
+            continue
+        params = effect.params_dict()
+        reach = FORM_TRUSTED_FROM_RADII * float(params["radius"]) - float(params.get("offset", 0.0))  # type: ignore[arg-type]
+        for s, seg in enumerate(data.segments):
+            distance = values[name][starts[s]:starts[s + 1]][seg.fit_rows]
+            out[s] |= np.nan_to_num(distance, nan=np.inf) < reach
+    return out
+
+
+def _share(near: list[np.ndarray]) -> float:
+    total = sum(len(n) for n in near)
+    return float(sum(int(n.sum()) for n in near) / total) if total else 0.0
+
+
+def _score(candidate: Candidate, near: list[np.ndarray], n_eff: float) -> float:
+    """:func:`~discovery.selection.score` on the held-out residual of the rows fitted on, with the effective sample
+    count scaled to their share."""
+    rows = np.concatenate([r[~n] for r, n in zip(candidate.cv_residual, near)])
+    axes = np.mean(rows**2, axis=0) if rows.size else np.zeros(3)
+    return score(axes, candidate.n_params, n_eff * (1.0 - _share(near)))
+
+
+def _fixed_point(fitter: Fitter, keys: list[str], start: Candidate, hold: dict[str, dict[int, float]],
+                 data: FlightData, regressors: list[Regressor], say: Callable[[str], None] | None
+                 ) -> tuple[Candidate | None, list[np.ndarray]]:
+    """``keys`` fitted without the rows nearer a surface than the form is trusted, the rows set by the fit itself;
+    ``None`` when too few rows would stay."""
+    near = near_rows(data, regressors, start.fit.effects)
+    current = start
+    for _ in range(ITERATIONS):
+        if 1.0 - _share(near) < MIN_FITTED_SHARE:
+            return None, near
+        if say is not None:
+            say(f"fitting {' + '.join(keys)} without the {100 * _share(near):.0f} % of samples nearer a surface than "
+                "its form is trusted")
+        current = fitter.candidate(keys, previous=current.previous(), hold={k: v for k, v in hold.items() if k in keys},
+                                   exclude=near)
+        again = near_rows(data, regressors, current.fit.effects)
+        if all(np.array_equal(a, b) for a, b in zip(again, near)):
+            break
+        near = again
+    return current, near
+
+
+def _simpler(fitter: Fitter, current: Candidate, near: list[np.ndarray], hold: dict[str, dict[int, float]],
+             n_eff: float) -> Candidate | None:
+    """The best-scoring change on the rows within the form that scores better than ``current`` there: another effect
+    left out, or a ground or ceiling effect in its other form (a distance offset that only bent the gain toward the
+    samples set aside); ``None`` when no change does."""
+    best, best_score = None, _score(current, near, n_eff)
+    for key in current.names:
+        if effect_name(key) in SURFACE_DISTANCE:
+            changes = [[form if k == key else k for k in current.names] for form in fitter.templates
+                       if effect_name(form) == effect_name(key) and form != key]
+        elif any(effect_name(k) in SURFACE_DISTANCE for k in current.names if k != key):
+            changes = [[k for k in current.names if k != key]]
+        else:
+            changes = []
+        for keys in changes:
+            previous = {k: v for k, v in current.previous().items() if k in keys}
+            kept = {k: v for k, v in hold.items() if k in keys}
+            candidate = fitter.candidate(keys, previous=previous, hold=kept, exclude=near)
+            value = _score(candidate, near, n_eff)
+            if value < best_score and not open_cases(candidate, kept):
+                best, best_score = candidate, value
+    return best
+
+
+def fit_within_form(fitter: Fitter, final: Candidate, hold: dict[str, dict[int, float]], data: FlightData,
+                    regressors: list[Regressor], n_eff: float, say: Callable[[str], None] | None = None
+                    ) -> tuple[Candidate, dict[str, dict[int, float]], dict[str, Any] | None]:
+    """``final`` refitted without the samples nearer a surface than its ground or ceiling effect's form is trusted,
+    the entries held, and what was done (``None`` when ``final`` has no such effect or never flew that near).
+
+    Within that range the set is asked again, as the backward check of :mod:`discovery.selection` does, on the
+    held-out residual of the rows fitted on (``n_eff``: the flight's effective samples per axis): an effect that only
+    paid for itself on the samples set aside, or a distance offset that only bent the gain toward them, goes.
+
+    The summary holds the effects, ``share_set_aside`` of the fit rows and the seconds, each effect's parameters
+    fitted on everything and within the form, what was ``changed`` and ``applied``: False (the fit on everything
+    kept) when less than :data:`MIN_FITTED_SHARE` of the rows would stay or the refit leaves a parameter
+    undetermined."""
+    effects = [e for e in final.fit.effects if e.name in SURFACE_DISTANCE]
+    if not effects or not final.names:
+        return final, hold, None
+    if not any(n.any() for n in near_rows(data, regressors, final.fit.effects)):
+        return final, hold, None
+    summary: dict[str, Any] = {"effects": [e.name for e in effects],
+                               "surfaces": [SURFACE_NAME[e.name] for e in effects],
+                               "on_all": {e.name: e.params_dict() for e in effects}, "applied": False, "changed": []}
+    current, near = _fixed_point(fitter, list(final.names), final, hold, data, regressors, say)
+    for _ in range(len(final.names) + 1):
+        if current is None:
+            break
+        simpler = _simpler(fitter, current, near, hold, n_eff)
+        if simpler is None:
+            break
+        summary["changed"].append({"from": list(current.names), "to": list(simpler.names)})
+        current, near = _fixed_point(fitter, list(simpler.names), simpler, hold, data, regressors, say)
+    total_s = sum(seg.n * seg.dt for seg in data.segments)
+    summary["share_set_aside"] = _share(near)
+    summary["seconds_set_aside"] = float(_share(near) * total_s)
+    if current is None:
+        summary["reason"] = (f"{100 * _share(near):.0f} % of the flight had a rotor that near: the fit on all of it "
+                             "is kept")
+        summary["changed"] = []
+        return final, hold, summary
+    if open_cases(current, {k: v for k, v in hold.items() if k in current.names}):
+        summary["reason"] = "without those samples the flight no longer determines every parameter: the fit on " \
+                            "all of it is kept"
+        summary["changed"] = []
+        return final, hold, summary
+    summary["applied"] = True
+    summary["within_form"] = {e.name: e.params_dict() for e in current.fit.effects if e.name in SURFACE_DISTANCE}
+    return current, {k: v for k, v in hold.items() if k in current.names}, summary
