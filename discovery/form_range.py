@@ -129,7 +129,8 @@ def fit_within_form(fitter: Fitter, final: Candidate, hold: dict[str, dict[int, 
     held-out residual of the rows fitted on (``n_eff``: the flight's effective samples per axis): an effect that only
     paid for itself on the samples set aside, or a distance offset that only bent the gain toward them, goes.
 
-    The summary holds the effects, ``share_set_aside`` of the fit rows and the seconds, each effect's parameters
+    The summary holds the effects, the rotors' ``closest_m`` approach to their surfaces, ``share_set_aside`` of the
+    fit rows and the seconds, each effect's parameters
     fitted on everything and within the form, what was ``changed`` and ``applied``: False (the fit on everything
     kept) when less than :data:`MIN_FITTED_SHARE` of the rows would stay or the refit leaves a parameter
     undetermined."""
@@ -138,8 +139,11 @@ def fit_within_form(fitter: Fitter, final: Candidate, hold: dict[str, dict[int, 
         return final, hold, None
     if not any(n.any() for n in near_rows(data, regressors, final.fit.effects)):
         return final, hold, None
+    values = {r.name: r.values for r in regressors}
+    closest = [float(np.nanmin(values[SURFACE_DISTANCE[e.name]])) for e in effects if SURFACE_DISTANCE[e.name] in values]
     summary: dict[str, Any] = {"effects": [e.name for e in effects],
                                "surfaces": [SURFACE_NAME[e.name] for e in effects],
+                               "closest_m": min(closest) if closest else None,
                                "on_all": {e.name: e.params_dict() for e in effects}, "applied": False, "changed": []}
     current, near = _fixed_point(fitter, list(final.names), final, hold, data, regressors, say)
     for _ in range(len(final.names) + 1):

@@ -624,9 +624,10 @@ class Discovery:
         if summary is None:
             return final
         names, surfaces = ", ".join(summary["effects"]), " or ".join(summary["surfaces"])
+        closest = f" (the closest {1e3 * summary['closest_m']:.3g} mm)" if summary["closest_m"] is not None else ""
         aside = (f"{100 * summary['share_set_aside']:.0f} % of the samples ({summary['seconds_set_aside']:.1f} s) had "
-                 f"a rotor within {FORM_TRUSTED_FROM_RADII:g} effective radius of {surfaces}, where how the gain "
-                 "levels off is the form's guess")
+                 f"a rotor within {FORM_TRUSTED_FROM_RADII:g} effective radius of {surfaces}{closest}, where how the "
+                 "gain levels off is the form's guess")
         on_all = "; ".join(f"{name} {_params_text(params)}" for name, params in summary["on_all"].items())
         if summary["applied"]:
             self.notes_.append(f"{names} fitted without the samples nearer {surfaces} than its form is trusted: "

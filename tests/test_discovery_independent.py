@@ -289,6 +289,7 @@ def test_a_ceiling_flown_nearer_than_its_form_is_trusted_is_fitted_beyond_that(t
     assert found.names_ == ["ceiling_effect"]
     summary = found.form_range_
     assert summary["applied"] and 0.1 < summary["share_set_aside"] < 0.7
+    assert 0.0 < summary["closest_m"] < 0.6 * radius  # inside the range where this simulator's gain levels off
     assert summary["on_all"]["ceiling_effect"]["radius"] > 1.05 * radius  # what those samples would have done
     assert found.effects_[0].values["radius"] == pytest.approx(radius, rel=0.04)
     text = format_summary(found.report())
