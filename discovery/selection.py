@@ -300,27 +300,37 @@ AFFINE_MAP = variant_key("thrust_scale", {"affine": True})
 #: the regressors of the surfaces whose effects scale the thrust (ground and ceiling effects)
 THRUST_SURFACES = ("height above ground", "distance to ceiling")
 NEAR_SHARE = 0.1  # of the samples near such a surface before its pull is much of what a steady thrust answers
+HOLD_VARIATION = 0.01  # std/mean of the thrust below which a flight is a hold, wherever it is flown
 
 
 def _affine_map_confounded(data: FlightData, thrust: np.ndarray) -> list[dict]:
     """Why the affine thrust map is not a candidate, as a limit (empty when it is), on a flight whose thrust varies
     by less than :data:`~discovery.coverage.THRUST_VARIATION`: when the flight spends :data:`NEAR_SHARE` of its
     samples within :data:`~discovery.coverage.NEAR_SURFACE` of the ground or a ceiling (not a take-off and a landing
-    alone).
+    alone), or anywhere when it varies by less than :data:`HOLD_VARIATION` (a hold).
 
     The map's scale and offset are told apart by how the force follows the thrust's changes. A steady thrust's small
     changes are the closed loop answering the forces on the vehicle, and near the ground or a ceiling much of that
     force is the surface's, a function of the height the thrust then follows: hovering 13 cm under a ceiling (the
     thrust varying by 0.5 %), a map of scale 0.38 with an 8.1 N offset fitted the ceiling's pull through the
-    thrust and scored two parameters' prices ahead of the ceiling effect. Away from surfaces the loop answers a random
-    force the thrust cannot foretell, and a hover determines the map. The plain thrust scale and the steady force
-    stay (the flight limits say they look alike)."""
+    thrust and scored two parameters' prices ahead of the ceiling effect. Away from surfaces the loop mostly answers
+    a random force the thrust cannot foretell, and a hover whose thrust varies by 2 % determined a map within 2 %.
+    Holding still it answers little else but the forces the flight carries, whatever they depend on: holding near
+    1.2 m against a force growing with height (the thrust varying by 0.5 %), a map of scale 1.50 with a -7.6 N
+    offset was written. The plain thrust scale and the steady force stay (the flight limits say they look alike)."""
     from discovery.determination import determining_manoeuvre
 
     near = [r.name for r in regressors(data) if r.name in THRUST_SURFACES
             and np.mean(np.nan_to_num(r.values, nan=np.inf) <= NEAR_SURFACE) >= NEAR_SHARE]
     if not near:
-        return []
+        if thrust_variation(thrust) >= HOLD_VARIATION:
+            return []
+        return [{"effects": [AFFINE_MAP], "reason": f"not fitted: the thrust varies by only "
+                                                    f"{100 * thrust_variation(thrust):.2f} % (std/mean), a hold, and "
+                                                    "a thrust map's scale and offset are told apart by how the force "
+                                                    "follows the thrust's changes, which in a hold are the closed "
+                                                    "loop answering the forces on the vehicle",
+                 "manoeuvre": determining_manoeuvre("thrust_scale", "offset")}]
     surfaces = " and ".join("the ground" if n == "height above ground" else "the ceiling" for n in near)
     return [{"effects": [AFFINE_MAP], "reason": f"not fitted: the thrust varies by only "
                                                 f"{100 * thrust_variation(thrust):.1f} % (std/mean) near {surfaces}, "

@@ -308,3 +308,33 @@ def test_a_flight_that_stays_nearer_the_ground_than_the_form_is_trusted_keeps_th
     assert not summary["applied"] and summary["share_set_aside"] > 0.7
     assert any(limit["effects"] == ["ground_effect"] and "the fit on all of it is kept" in limit["reason"]
                for limit in found.limits_)
+
+
+def _hold(flight: dict, share: float = 0.15) -> dict:
+    """``flight`` with every amplitude scaled by ``share``: a hold with little excitation."""
+    return {**flight, "amplitude": tuple(share * a for a in flight["amplitude"])}
+
+
+def test_a_hold_against_a_force_growing_with_height_writes_no_thrust_map(tmp_path):
+    """Holding near 1.2 m (the thrust varying by 0.5 %) against a force growing with height, an affine thrust map of
+    scale 1.50 with a -7.6 N offset was written: the loop's small thrust changes answer that force, and the map fitted
+    it through them. In a hold the map is not fitted, and the report says why."""
+    from tests.independent_cases import TALL
+
+    rows = fly({"height_force": 0.6}, duration=60.0, rate_hz=100.0, seed=389, **_hold(TALL))
+    found = _discover(write(rows, tmp_path / "height.csv", seed=389, wall=False))
+    assert not any(e.name == "thrust_scale" and "offset" in e.values for e in found.effects_)
+    limit = next(x for x in found.limits_ if x["effects"] == ["thrust_scale[affine]"])
+    assert "a hold" in limit["reason"] and "climb and descend briskly" in limit["manoeuvre"]
+
+
+def test_a_hover_whose_thrust_varies_by_two_percent_still_determines_a_thrust_map(tmp_path):
+    """Away from surfaces, the thrust varying by 2 % as the hover answers random forces, the map is fitted."""
+    from tests.independent_cases import OPEN
+
+    rows = fly({"thrust_scale": 0.91, "thrust_offset": -1.2}, duration=60.0, rate_hz=100.0, seed=390,
+               **_hold(OPEN))
+    found = _discover(write(rows, tmp_path / "map.csv", seed=390, wall=False))
+    assert found.names_ == ["thrust_scale"]
+    values = found.effects_[0].values
+    assert values["scale"][0] == pytest.approx(0.91, rel=0.05) and values["offset"][0] == pytest.approx(-1.2, rel=0.1)
