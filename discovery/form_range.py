@@ -152,8 +152,11 @@ def fit_within_form(fitter: Fitter, final: Candidate, hold: dict[str, dict[int, 
         simpler = _simpler(fitter, current, near, hold, n_eff)
         if simpler is None:
             break
+        again, near_again = _fixed_point(fitter, list(simpler.names), simpler, hold, data, regressors, say)
+        if again is None:  # the simpler set's range leaves too little: the set before it stays
+            break
         summary["changed"].append({"from": list(current.names), "to": list(simpler.names)})
-        current, near = _fixed_point(fitter, list(simpler.names), simpler, hold, data, regressors, say)
+        current, near = again, near_again
     total_s = sum(seg.n * seg.dt for seg in data.segments)
     summary["share_set_aside"] = _share(near)
     summary["seconds_set_aside"] = float(_share(near) * total_s)

@@ -646,6 +646,8 @@ class Discovery:
         if within is final:
             return final
         self._hold = hold
+        dropped = {e.name for e in final.fit.effects} - {e.name for e in within.fit.effects}
+        self.limits_ = [x for x in self.limits_ if not ("proxy" in x and set(x["effects"]) <= dropped)]
         final = self._never_worse(data, r_nom, within, selection)
         self._finish(data, r_nom, final, selection)
         return final
