@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from tests import independent_sim
 from tests.independent_sim import CEILING_Z, GRAVITY, MASS, NEAR_WALL, fly, turbulence, write
 
 WALL = {"centre": (0.25, 0.0, 1.0), "amplitude": (0.09, 0.5, 0.25), "period": (7.0, 9.0, 3.0), "gains": NEAR_WALL}
@@ -260,7 +261,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--keep", default=None, help="folder to keep the logs and reports in")
     parser.add_argument("--waypoints", type=float, default=0.0,
                         help="fly every survey between waypoints (tanh sharpness, 2 is brisk; 0: sinusoids)")
+    parser.add_argument("--gain-floor", type=float, default=independent_sim.GAIN_FLOOR_RADII,
+                        help="radii at which the image-rotor gain levels off (default %(default)s; the library's: 0.5)")
     args = parser.parse_args(argv)
+    if not 0.25 < args.gain_floor < 5.0:  # at a quarter of the radius the image-rotor gain is infinite
+        parser.error(f"--gain-floor must be in (0.25, 5) radii, got {args.gain_floor}")
+    independent_sim.GAIN_FLOOR_RADII = args.gain_floor
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     wanted = None if args.cases is None else {c.strip() for c in args.cases.split(",")}
     records = []

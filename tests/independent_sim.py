@@ -37,6 +37,8 @@ _CONTACT_STIFFNESS = 3000.0  # N/m
 _CONTACT_DAMPING = 80.0  # N s/m
 _CONTACT_FRICTION = 20.0  # N s/m, horizontal, while in contact
 CEILING_Z = 2.0  # m, the ceiling's height when a ceiling effect is flown
+#: radii (distance plus offset) at which the image-rotor gain levels off; the library's form levels off at 0.5
+GAIN_FLOOR_RADII = 0.6
 #: position-loop gains that beat wall suction's pull (its negative stiffness, 2 k_s for two near rotors, reaches
 #: 14 N/m at k_s = 7 N/m; the default loop's 1.3 kg x 6 /s^2 = 7.8 N/m let the vehicle through the wall, which this
 #: simulator does not stop)
@@ -58,8 +60,9 @@ def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _image_gain(radius: float, distance: float, offset: float) -> float:
-    """Thrust in ground (or ceiling) effect over thrust far from it: ``1 / (1 - (rho / 4 (d + k2))^2)``."""
-    d = max(distance + offset, 0.6 * radius)
+    """Thrust in ground (or ceiling) effect over thrust far from it: ``1 / (1 - (rho / 4 (d + k2))^2)``, levelling off
+    at :data:`GAIN_FLOOR_RADII` radii."""
+    d = max(distance + offset, GAIN_FLOOR_RADII * radius)
     return 1.0 / (1.0 - (radius / (4.0 * d)) ** 2)
 
 
