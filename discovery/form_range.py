@@ -73,12 +73,11 @@ def _score(candidate: Candidate, near: list[np.ndarray], n_eff: float) -> float:
     return score(axes, candidate.n_params, n_eff * (1.0 - _share(near)))
 
 
-def _fixed_point(fitter: Fitter, keys: list[str], start: Candidate, hold: dict[str, dict[int, float]],
-                 data: FlightData, regressors: list[Regressor], say: Callable[[str], None] | None
-                 ) -> tuple[Candidate | None, list[np.ndarray]]:
-    """``keys`` fitted without the rows nearer a surface than the form is trusted, the rows set by the fit itself;
-    ``None`` when too few rows would stay."""
-    near = near_rows(data, regressors, start.fit.effects)
+def _fixed_point(fitter: Fitter, keys: list[str], start: Candidate, near: list[np.ndarray],
+                 hold: dict[str, dict[int, float]], data: FlightData, regressors: list[Regressor],
+                 say: Callable[[str], None] | None) -> tuple[Candidate | None, list[np.ndarray]]:
+    """``keys`` fitted without the rows nearer a surface than the form is trusted (``near``: those of ``start``'s
+    fit), the rows set by the fit itself; ``None`` when too few rows would stay."""
     current = start
     for _ in range(ITERATIONS):
         if 1.0 - _share(near) < MIN_FITTED_SHARE:
@@ -86,8 +85,7 @@ def _fixed_point(fitter: Fitter, keys: list[str], start: Candidate, hold: dict[s
         if say is not None:
             say(f"fitting {' + '.join(keys)} without the {100 * _share(near):.0f} % of samples nearer a surface than "
                 "its form is trusted")
-        current = fitter.candidate(keys, previous=current.previous(), hold={k: v for k, v in hold.items() if k in keys},
-                                   exclude=near)
+        current = fitter.candidate(keys, previous=current.previous(), hold=hold, exclude=near)
         again = near_rows(data, regressors, current.fit.effects)
         if all(np.array_equal(a, b) for a, b in zip(again, near)):
             break
@@ -111,10 +109,9 @@ def _simpler(fitter: Fitter, current: Candidate, near: list[np.ndarray], hold: d
             changes = []
         for keys in changes:
             previous = {k: v for k, v in current.previous().items() if k in keys}
-            kept = {k: v for k, v in hold.items() if k in keys}
-            candidate = fitter.candidate(keys, previous=previous, hold=kept, exclude=near)
+            candidate = fitter.candidate(keys, previous=previous, hold=hold, exclude=near)
             value = _score(candidate, near, n_eff)
-            if value < best_score and not open_cases(candidate, kept):
+            if value < best_score and not open_cases(candidate, hold):
                 best, best_score = candidate, value
     return best
 
@@ -135,9 +132,8 @@ def fit_within_form(fitter: Fitter, final: Candidate, hold: dict[str, dict[int, 
     kept) when less than :data:`MIN_FITTED_SHARE` of the rows would stay or the refit leaves a parameter
     undetermined."""
     effects = [e for e in final.fit.effects if e.name in SURFACE_DISTANCE]
-    if not effects or not final.names:
-        return final, hold, None
-    if not any(n.any() for n in near_rows(data, regressors, final.fit.effects)):
+    near = near_rows(data, regressors, final.fit.effects)
+    if not effects or not any(n.any() for n in near):
         return final, hold, None
     values = {r.name: r.values for r in regressors}
     closest = [float(np.nanmin(values[SURFACE_DISTANCE[e.name]])) for e in effects if SURFACE_DISTANCE[e.name] in values]
@@ -145,14 +141,15 @@ def fit_within_form(fitter: Fitter, final: Candidate, hold: dict[str, dict[int, 
                                "surfaces": [SURFACE_NAME[e.name] for e in effects],
                                "closest_m": min(closest) if closest else None,
                                "on_all": {e.name: e.params_dict() for e in effects}, "applied": False, "changed": []}
-    current, near = _fixed_point(fitter, list(final.names), final, hold, data, regressors, say)
+    current, near = _fixed_point(fitter, list(final.names), final, near, hold, data, regressors, say)
     for _ in range(len(final.names) + 1):
         if current is None:
             break
         simpler = _simpler(fitter, current, near, hold, n_eff)
         if simpler is None:
             break
-        again, near_again = _fixed_point(fitter, list(simpler.names), simpler, hold, data, regressors, say)
+        again, near_again = _fixed_point(fitter, list(simpler.names), simpler,
+                                         near_rows(data, regressors, simpler.fit.effects), hold, data, regressors, say)
         if again is None:  # the simpler set's range leaves too little: the set before it stays
             break
         summary["changed"].append({"from": list(current.names), "to": list(simpler.names)})
@@ -165,7 +162,7 @@ def fit_within_form(fitter: Fitter, final: Candidate, hold: dict[str, dict[int, 
                              "is kept")
         summary["changed"] = []
         return final, hold, summary
-    if open_cases(current, {k: v for k, v in hold.items() if k in current.names}):
+    if open_cases(current, hold):
         summary["reason"] = "without those samples the flight no longer determines every parameter: the fit on " \
                             "all of it is kept"
         summary["changed"] = []

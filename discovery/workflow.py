@@ -596,8 +596,7 @@ class Discovery:
                 self._say(f"once {', '.join(sorted(dropped))} go, {', '.join(left_out)} is undetermined: left out, "
                           "and the rest asked again")
                 self.undetermined_ += [c for c in undetermined if c["action"].startswith("effect left out")]
-                gone = {fitter.templates[k].name for k in left_out}  # what was said of their parameters goes too
-                self.limits_ = [x for x in self.limits_ if not ("proxy" in x and set(x["effects"]) <= gone)]
+                self._drop_proxy_limits({fitter.templates[k].name for k in left_out})
                 final, self._hold, again = self._refit_kept(fitter, [k for k in final.names if k not in left_out],
                                                             final.previous())
                 self.undetermined_ += again
@@ -646,11 +645,14 @@ class Discovery:
         if within is final:
             return final
         self._hold = hold
-        dropped = {e.name for e in final.fit.effects} - {e.name for e in within.fit.effects}
-        self.limits_ = [x for x in self.limits_ if not ("proxy" in x and set(x["effects"]) <= dropped)]
+        self._drop_proxy_limits({e.name for e in final.fit.effects} - {e.name for e in within.fit.effects})
         final = self._never_worse(data, r_nom, within, selection)
         self._finish(data, r_nom, final, selection)
         return final
+
+    def _drop_proxy_limits(self, gone: set[str]) -> None:
+        """What was said of the parameters of effects no longer in the model (``gone``, effect names) as proxies."""
+        self.limits_ = [x for x in self.limits_ if not ("proxy" in x and set(x["effects"]) <= gone)]
 
     def _refit_kept(self, fitter, keys: list[str], previous: dict[str, np.ndarray]
                     ) -> tuple[Candidate, dict[str, dict[int, float]], list]:
