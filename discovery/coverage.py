@@ -13,6 +13,11 @@ Two checks that make a report say *why* it could or could not say more:
   the touchdown before they stop, next to a rest: near the height the vehicle rested
   at, with the thrust below the weight. The ground still carries part of the weight
   (the thrust ramps from half the weight to all of it), so these are left out too.
+- :func:`at_ceiling`: which of those samples are at the ceiling rather than on the
+  ground. A vehicle can be held *up* there too: drawn to the ceiling by its rotors'
+  own ceiling effect, with the thrust cut below half the weight, it stays. That is
+  contact with the ceiling or a gain nearer the ceiling than any image-rotor form is
+  trusted (:mod:`discovery.form_range`), so it is left out as well, under its own name.
 - :func:`scene_problems`: a rotor behind a wall, below the ground or above the
   ceiling means the scene (sidecar or scene file) is wrong, not the physics: the
   note says which surface and the fix (flip a wall normal, move a point, lower
@@ -30,8 +35,8 @@ import numpy as np
 from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 
-__all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "resting_on_ground", "ground_contact", "flight_limits", "nearest_wall",
-           "thrust_variation", "scene_problems"]
+__all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "resting_on_ground", "ground_contact", "at_ceiling", "rotor_clearances",
+           "flight_limits", "nearest_wall", "thrust_variation", "scene_problems"]
 
 REST_THRUST_SHARE = 0.5  # of the weight
 NOT_FALLING = 0.25  # of g: falling this much slower than the thrust lets it, with thrust below half the weight, is held
@@ -68,8 +73,10 @@ def ground_contact(log: FlightLog) -> tuple[np.ndarray, np.ndarray]:
     rested at (the median over the :data:`CONTACT_CENTRE_S` next to the stretch's end), or before a touchdown the
     higher of that and the heights it took off from. The ground still carries part of the weight there, a force
     that is not aerodynamic. The velocity is not asked: a state estimate drifts on touchdown (a PX4 SITL log
-    reads 0.46 m/s down, and heights down to 0.45 m below the take-off's, while on the ground). Returns
-    ``(resting, contact)``: the held-up samples and the spin-up and touchdown samples next to them."""
+    reads 0.46 m/s down, and heights down to 0.45 m below the take-off's, while on the ground). A stretch held
+    at the ceiling (:func:`at_ceiling`) is extended the other way: while the vehicle stays no more than
+    :data:`CONTACT_HEIGHT` below the height it was held at. Returns ``(resting, contact)``: the held-up samples
+    and the samples next to them that the surface still carries."""
     resting = resting_on_ground(log)
     contact = np.zeros_like(resting)
     if not resting.any() or resting.all():
@@ -78,25 +85,51 @@ def ground_contact(log: FlightLog) -> tuple[np.ndarray, np.ndarray]:
     vertical = thrust * log.R_body_to_world[:, 2, 2]
     weight = log.vehicle.mass * log.gravity
     height = log.p_world[:, 2]
+    ceiling = at_ceiling(log, resting)
     dt = float(np.median(np.diff(log.t)))
     centre = max(1, int(round(CONTACT_CENTRE_S / dt)))
     edges = np.flatnonzero(np.diff(resting.astype(int)))  # index before each change
-    take_off: list[float] = []  # heights the vehicle rested at before each take-off
+    take_off: list[float] = []  # heights the vehicle rested at on the ground before each take-off
     for edge in edges:
-        if resting[edge]:  # a rest stretch ends at edge: spin-up after it
-            ground = float(np.median(height[max(0, edge - centre + 1):edge + 1]))
-            take_off.append(ground)
+        rest = edge if resting[edge] else edge + 1
+        if resting[edge]:  # a rest stretch ends at edge: spin-up (or leaving the ceiling) after it
+            held = float(np.median(height[max(0, edge - centre + 1):edge + 1]))
+            if not ceiling[rest]:
+                take_off.append(held)
             step, i = 1, edge + 1
         else:  # a rest stretch starts at edge + 1: touchdown before it; the estimate may have drifted below
             # the height the vehicle took off from (a PX4 SITL log reads 0.45 m below it), and the vehicle is down
             # once it is back at that height
-            ground = max([float(np.median(height[edge + 1:edge + 1 + centre]))] + take_off)
+            held = float(np.median(height[edge + 1:edge + 1 + centre]))
+            if not ceiling[rest]:
+                held = max([held] + take_off)
             step, i = -1, edge
+        # on the ground the vehicle is carried while no higher than it rested; at the ceiling, no lower than it hung
+        sign = -1.0 if ceiling[rest] else 1.0
         while 0 <= i < len(height) and not resting[i] and vertical[i] < weight \
-                and height[i] <= ground + CONTACT_HEIGHT:
+                and sign * (height[i] - held) <= CONTACT_HEIGHT:
             contact[i] = True
             i += step
     return resting, contact
+
+
+def at_ceiling(log: FlightLog, samples: np.ndarray) -> np.ndarray:
+    """Which of ``samples`` (a mask) the vehicle spent at the ceiling rather than on the ground: the scene has a
+    ceiling, the highest rotor is within :data:`NEAR_SURFACE` of it and nearer it than the lowest rotor is to the
+    ground (when the scene has one)."""
+    below_ceiling, above_ground = rotor_clearances(log)
+    return samples & (below_ceiling < NEAR_SURFACE) & (below_ceiling < above_ground)
+
+
+def rotor_clearances(log: FlightLog) -> tuple[np.ndarray, np.ndarray]:
+    """``(below_ceiling, above_ground)`` (m) at every sample: the highest rotor's distance under the ceiling and the
+    lowest rotor's height above the ground, inf where the scene has no such surface; negative past the plane."""
+    rotor_z = log.p_world[:, None, 2] + np.einsum("nj,rj->nr", log.R_body_to_world[:, 2, :],
+                                                   log.vehicle.rotor_positions_array)
+    never = np.full(log.n_samples, np.inf)
+    below_ceiling = log.scene.ceiling_z - rotor_z.max(axis=1) if log.scene.ceiling_z is not None else never
+    above_ground = rotor_z.min(axis=1) - log.scene.ground_z if log.scene.ground_z is not None else never
+    return below_ceiling, above_ground
 
 
 def nearest_wall(regressors: list) -> float | None:

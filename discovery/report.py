@@ -56,7 +56,7 @@ Keys:
     where each field of the model file's vehicle came from: given in the vehicle block, derived from it,
     found (a motor lag), or defaulted (the paper vehicle's value; the log says nothing about it).
 ``left_out``
-    the stretches of each log left out and why (held up, ground contact).
+    the stretches of each log left out and why (held up, ground contact, held at the ceiling).
 ``withheld``
     ``null``, or the effects a model held that were not written because its held-out force gap was
     not smaller than the nominal model's.

@@ -58,7 +58,17 @@ from threadpoolctl import threadpool_limits
 
 from discovery.cancelling import cancelling_sets, simpler
 from discovery.cancelling import manoeuvre as cancel_manoeuvre
-from discovery.coverage import CONTACT_HEIGHT, NEAR_SURFACE, REST_THRUST_SHARE, flight_limits, ground_contact, nearest_wall, scene_problems
+from discovery.coverage import (
+    CONTACT_HEIGHT,
+    NEAR_SURFACE,
+    REST_THRUST_SHARE,
+    at_ceiling,
+    flight_limits,
+    ground_contact,
+    nearest_wall,
+    rotor_clearances,
+    scene_problems,
+)
 from discovery.determination import determining_manoeuvre, refit_determined
 from discovery.fitting import Candidate, EffectFit
 from discovery.flight_log import FlightLog
@@ -623,7 +633,9 @@ class Discovery:
         if summary is None:
             return final
         names, surfaces = ", ".join(summary["effects"]), " or ".join(summary["surfaces"])
-        closest = f" (the closest {1e3 * summary['closest_m']:.3g} mm)" if summary["closest_m"] is not None else ""
+        closest_m = summary["closest_m"]
+        closest = "" if closest_m is None else (f" (the closest {1e3 * closest_m:.3g} mm)" if closest_m >= 0 else
+                                                 f" (one reached {-1e3 * closest_m:.3g} mm past its plane)")
         aside = (f"{100 * summary['share_set_aside']:.0f} % of the samples ({summary['seconds_set_aside']:.1f} s) had "
                  f"a rotor within {FORM_TRUSTED_FROM_RADII:g} effective radius of {surfaces}{closest}, where how the "
                  "gain levels off is the form's guess")
@@ -728,18 +740,24 @@ class Discovery:
         for log in logs:
             resting, contact = ground_contact(log)
             dt = float(np.median(np.diff(log.t)))
-            if resting.any():
+            hung, near_ceiling = at_ceiling(log, resting), at_ceiling(log, contact)
+            resting_low, contact_low = resting & ~hung, contact & ~near_ceiling
+            if resting_low.any():
                 self.notes_.append(
-                    f"{log.source}: {resting.sum() * dt:.1f} s of {log.duration:.1f} s held up by something "
+                    f"{log.source}: {resting_low.sum() * dt:.1f} s of {log.duration:.1f} s held up by something "
                     f"else: the thrust carries less than {100 * REST_THRUST_SHARE:.0f} % of the weight and the vehicle "
                     "does not fall (on the ground or held): "
                     "left out, that force is not aerodynamic")
-            if contact.any():
+            if contact_low.any():
                 self.notes_.append(
-                    f"{log.source}: {contact.sum() * dt:.1f} s of rotors spinning up or down on the ground (next to a "
-                    f"rest, no more than {100 * CONTACT_HEIGHT:.0f} cm above the ground the vehicle rested on or took "
-                    "off from, the thrust below the weight): left out, the ground still carries part of the weight")
-            for mask, why in ((resting, "held up"), (contact, "ground contact")):
+                    f"{log.source}: {contact_low.sum() * dt:.1f} s of rotors spinning up or down on the ground (next "
+                    f"to a rest, no more than {100 * CONTACT_HEIGHT:.0f} cm above the ground the vehicle rested on or "
+                    "took off from, the thrust below the weight): left out, the ground still carries part of the weight")
+            if hung.any():
+                self.notes_.append(self._held_at_ceiling(log, hung | near_ceiling, hung.sum() * dt,
+                                                         near_ceiling.sum() * dt))
+            for mask, why in ((resting_low, "held up"), (contact_low, "ground contact"),
+                              (hung | near_ceiling, "held at the ceiling")):
                 if mask.any():
                     self.left_out_.append({"log": log.source, "reason": why, "seconds": round(float(mask.sum() * dt), 3),
                                            "time_intervals": _intervals(log.t, mask)})
@@ -749,6 +767,19 @@ class Discovery:
                 if kept.duration >= shortest:
                     airborne.append(kept)
         return airborne
+
+    @staticmethod
+    def _held_at_ceiling(log: FlightLog, samples: np.ndarray, hung_s: float, next_to_s: float) -> str:
+        """The note for the samples ``log`` spent held at the ceiling (:func:`discovery.coverage.at_ceiling`)."""
+        closest = float(rotor_clearances(log)[0][samples].min())
+        where = (f"a rotor reached {1e3 * -closest:.3g} mm past the ceiling plane (scene.ceiling_z may be that much "
+                 "low, or the height estimate off)" if closest < 0 else
+                 f"the rotors came within {1e3 * closest:.3g} mm of the ceiling")
+        return (f"{log.source}: {hung_s:.1f} s of {log.duration:.1f} s held at the ceiling, with "
+                f"{next_to_s:.1f} s next to it no more than {100 * CONTACT_HEIGHT:.0f} cm below the height it hung at "
+                f"and the thrust below the weight: the thrust carries less than {100 * REST_THRUST_SHARE:.0f} % of "
+                f"the weight and the vehicle does not fall; {where}. Drawn up by its own ceiling effect, it is in "
+                "contact with the ceiling or nearer it than any image-rotor form is trusted: left out")
 
     def _checked_scene(self, data: FlightData, airborne: list[FlightLog]
                        ) -> tuple[FlightData, list[FlightLog], set[str]]:

@@ -1,10 +1,11 @@
-"""What discovery leaves out before fitting: samples something other than the thrust holds up."""
+"""What discovery leaves out before fitting: samples something other than the thrust holds up, on the ground or at
+the ceiling."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from discovery.coverage import resting_on_ground
+from discovery.coverage import CONTACT_HEIGHT, at_ceiling, ground_contact, resting_on_ground
 from discovery.flight_log import FlightLog, NominalVehicle
 from wall_env.scene import Scene
 from wall_env.vehicle import VehicleParams
@@ -25,14 +26,16 @@ def _thrust(t: np.ndarray, low_s: float, stop: bool) -> np.ndarray:
     return thrust
 
 
-def _log(t: np.ndarray, thrust: np.ndarray, v_z: np.ndarray, p_z: np.ndarray) -> FlightLog:
+def _log(t: np.ndarray, thrust: np.ndarray, v_z: np.ndarray, p_z: np.ndarray, scene: Scene | None = None
+         ) -> FlightLog:
     n = len(t)
     vehicle = NominalVehicle.from_vehicle_params(VehicleParams(mass=MASS))
     p = np.column_stack([np.full(n, 1.0), np.zeros(n), p_z])
     v = np.column_stack([np.zeros(n), np.zeros(n), v_z])
     q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
     return FlightLog(t=t, p_world=p, v_world=v, q_body_to_world=q, omega_body=np.zeros((n, 3)), thrust_cmd=thrust,
-                     omega_cmd_body=np.zeros((n, 3)), vehicle=vehicle, scene=Scene((), 0.0, None), gravity=G)
+                     omega_cmd_body=np.zeros((n, 3)), vehicle=vehicle, scene=scene or Scene((), 0.0, None),
+                     gravity=G)
 
 
 def test_a_quick_descent_on_low_thrust_is_flight_and_low_thrust_on_a_stand_is_held_up():
@@ -48,3 +51,32 @@ def test_a_quick_descent_on_low_thrust_is_flight_and_low_thrust_on_a_stand_is_he
     thrust = _thrust(t, 1.0, stop=False)  # a second at 40 % of the weight, not moving: a stand carries the rest
     on_a_stand = resting_on_ground(_log(t, thrust, np.zeros_like(t), np.full_like(t, 1.5)))
     assert np.array_equal(on_a_stand, thrust < 0.5 * WEIGHT)  # every low-thrust sample, and nothing else
+
+
+def test_a_vehicle_hanging_at_the_ceiling_is_told_from_one_on_the_ground_and_let_go_once_it_drops_away():
+    """Drawn up by its own ceiling effect, a vehicle can hang under the ceiling on 40 % of its weight. Those samples
+    are held up at the ceiling, not on the ground, and the stretch next to them is extended only while the vehicle
+    stays within CONTACT_HEIGHT *below* the height it hung at (the old rule, "no higher than the rest", held every
+    sample of the drop away from the ceiling while the thrust was below the weight)."""
+    ceiling_z, hang_z = 2.0, 1.998  # the rotors (in the body plane) 2 mm under the ceiling
+    t = np.arange(int(6.0 * RATE_HZ)) / RATE_HZ
+    thrust = np.where(t < 2.0, 0.4 * WEIGHT, np.where(t < 4.0, 0.8 * WEIGHT, WEIGHT))
+    # hanging until 3 s (on 80 % of the weight from 2 s, still held), then falling at 0.2 g until 4 s, then steady
+    fall = np.clip(t - 3.0, 0.0, 1.0)  # s of falling
+    v_z = -0.2 * G * fall
+    p_z = hang_z - 0.1 * G * fall ** 2 - 0.2 * G * np.clip(t - 4.0, 0.0, None)
+    scene = Scene((), 0.0, ceiling_z)
+    log = _log(t, thrust, v_z, p_z, scene)
+    resting, contact = ground_contact(log)
+    assert np.array_equal(resting, t < 2.0)  # the 40 % of the weight, and nothing else
+    assert np.array_equal(at_ceiling(log, resting), resting)
+    assert np.array_equal(at_ceiling(log, contact), contact)
+    dropped = hang_z - p_z > CONTACT_HEIGHT  # 3 cm below the hang: 0.175 s into the fall
+    first_dropped = float(t[np.argmax(dropped)])
+    assert 3.17 < first_dropped < 3.19
+    assert np.array_equal(contact, (t >= 2.0) & ~dropped & (t < 4.0))
+    # the same rest 2 mm above the ground, under the same ceiling: on the ground
+    on_ground = _log(t, thrust, np.zeros_like(t), np.full_like(t, 0.002), scene)
+    resting, contact = ground_contact(on_ground)
+    assert np.array_equal(resting, t < 2.0)
+    assert not at_ceiling(on_ground, resting | contact).any()
