@@ -28,11 +28,14 @@ from wall_env.effects import Effect
 if TYPE_CHECKING:
     from discovery.fitting import Candidate, Fitter
 
-__all__ = ["Z_95", "NULL_VALUES", "NULL_BY_EFFECT", "null_value", "MANOEUVRES", "Undetermined", "undetermined_cases",
-           "restrict", "determined", "entry", "nothing_left", "open_cases", "refit_determined",
-           "determining_manoeuvre", "separating_manoeuvre"]
+__all__ = ["Z_95", "NARROW_INTERVAL_SHARE", "NULL_VALUES", "NULL_BY_EFFECT", "null_value", "MANOEUVRES", "Undetermined",
+           "undetermined_cases", "restrict", "determined", "entry", "nothing_left", "open_cases", "refit_determined",
+           "determining_manoeuvre", "separating_manoeuvre", "loose_parameters"]
 
 Z_95 = 1.96
+#: a written parameter whose 95 % interval is wider than this share of its value on either side is reported with the
+#: manoeuvre that narrows it (the acceptance figures ask parameters within 10 %)
+NARROW_INTERVAL_SHARE = 0.10
 NULL_VALUES = {"k_s": 0.0, "d_thr": 0.0, "D": 0.0, "C": 0.0, "F": 0.0, "w": 0.0, "scale": 1.0, "radius": 0.0,
                "time_constant": 0.0}
 #: null values of parameters whose name means something else in another effect (an affine thrust map's offset, N,
@@ -57,6 +60,30 @@ MANOEUVRES = {
     ("motor_lag", "time_constant"): "climb and descend in steps of different lengths (0.3 s to 3 s), so that the "
                                     "thrust changes at several rates",
 }
+
+
+def loose_parameters(effects: list[Effect], stds: list[dict]) -> list[dict]:
+    """Determined parameters the flight pins only loosely: each entry whose 95 % interval's half-width is more than
+    :data:`NARROW_INTERVAL_SHARE` of the parameter's size (its value, or a vector's length), as ``{"effect",
+    "parameter", "value", "std", "interval_95_share", "manoeuvre"}``. A hold at one height, for instance, pins a
+    ground effect's gain there and only loosely how it splits between the radius and the distance offset."""
+    out = []
+    for effect, std in zip(effects, stds):
+        values = effect.params_dict()
+        for p in effect.parameters:
+            value = np.atleast_1d(np.asarray(values[p.name], dtype=float))
+            error = np.atleast_1d(np.asarray(std.get(p.name, np.nan), dtype=float))
+            size = float(np.linalg.norm(value))
+            if error.size != value.size or size == 0.0:
+                continue
+            for i in range(value.size):
+                share = Z_95 * float(error[i]) / size
+                if np.isfinite(share) and share > NARROW_INTERVAL_SHARE:
+                    index = i if p.size > 1 else None
+                    out.append({"effect": effect.name, "parameter": p.name if index is None else f"{p.name}[{i}]",
+                                "value": float(value[i]), "std": float(error[i]), "interval_95_share": share,
+                                "manoeuvre": determining_manoeuvre(effect.name, p.name, index)})
+    return out
 
 
 class Undetermined(dict):

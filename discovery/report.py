@@ -52,6 +52,10 @@ Keys:
     ``null``, or, when a ground or ceiling effect was kept and the flight came nearer the surface than its
     form is trusted (:mod:`discovery.form_range`): the share and seconds of samples set aside, the parameters
     fitted on everything and (when ``applied``) without them, or why the fit on everything was kept.
+``loose``
+    the written parameters the flight pins only loosely (:func:`discovery.determination.loose_parameters`): each
+    entry whose 95 % interval is wider than 10 % of the parameter on either side, as ``{"effect", "parameter",
+    "value", "std", "interval_95_share", "manoeuvre"}``, the manoeuvre being the one that narrows it.
 ``vehicle_fields``
     where each field of the model file's vehicle came from: given in the vehicle block, derived from it,
     found (a motor lag), or defaulted (the paper vehicle's value; the log says nothing about it).
@@ -92,7 +96,7 @@ from typing import Any
 
 import numpy as np
 
-from discovery.determination import separating_manoeuvre
+from discovery.determination import loose_parameters, separating_manoeuvre
 from discovery.selection import MIN_SHARE, MIN_WEIGHT_SHARE
 
 __all__ = ["build_report", "write_report", "format_summary"]
@@ -162,6 +166,7 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "vehicle_fields": found.model_.vehicle_fields,
         "wall_edge": found.wall_edge_,
         "form_range": found.form_range_,
+        "loose": loose_parameters(found.effects_, found.param_std_),
         "left_out": found.left_out_,
         "flights": found.flights_,
         "closed_loop": closed_loop,
@@ -215,6 +220,10 @@ def format_summary(report: dict[str, Any]) -> str:
                 place = f"{place} in [{where['range'][0]:.3g}, {where['range'][1]:.3g}] {where.get('unit') or ''}"
             lines.append(f"found {e['name']}: {params}; acts {place or 'nowhere'}; explains "
                          f"{100 * e['explained_fraction']:.0f} % of the held-out residual")
+            for loose in (x for x in report.get("loose") or [] if x["effect"] == e["name"]):
+                lines.append(f"  the flight determines {loose['parameter']} only to "
+                             f"+-{100 * loose['interval_95_share']:.0f} % (95 % interval); to narrow it: "
+                             f"{loose['manoeuvre']}")
     lag = report.get("motor_lag")
     if lag and lag["kept"]:
         lines.append(f"found a motor lag: time_constant={_fmt(lag['time_constant_s'])} +- {_fmt(lag['std_s'])} s (the "

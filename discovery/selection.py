@@ -384,7 +384,7 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
     Returns ``{"time_constant_s", "std_s", "interval_95_share", "to_narrow", "explained",
     "force_rms_N", "kept", "reason", "determined", "moves"}`` (``interval_95_share``: the 95 %
     interval's half-width as a share of the time constant; ``to_narrow``: the manoeuvre that
-    determines it better, when that share is above :data:`LAG_INTERVAL_SHARE`, else None;
+    determines it better, when that share is above :data:`~discovery.determination.NARROW_INTERVAL_SHARE`, else None;
     ``explained``: the share of the nominal held-out energy it adds to the chosen effects, on the
     rows past the starts;
     ``force_rms_N``: the force it accounts for; ``determined``: its interval is away from zero
@@ -405,7 +405,7 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
     weight, fitted as 29.6 +- 2.2 ms) left the ground effect's distance offset 12.5 % low, 3.0 %
     with the lag known.
     """
-    from discovery.determination import MANOEUVRES, Z_95, undetermined_cases
+    from discovery.determination import MANOEUVRES, NARROW_INTERVAL_SHARE, Z_95, undetermined_cases
 
     scale = [float(e.values["scale"][0]) for e in current.fit.effects if e.name == "thrust_scale"]
     template = MotorLag(segments=len(fitter.data.segments), thrust_scale=scale[0] if scale else 1.0)
@@ -444,7 +444,7 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
     nominal_mse = _scored_on(fitter, nominal, clear)[1]
     explained = (without[1] - with_lag[1]) / nominal_mse if nominal_mse > 0 else 0.0
     share = Z_95 * tau_std / tau if tau > 0 else math.inf
-    to_narrow = MANOEUVRES[(LAG_KEY, "time_constant")] if share > LAG_INTERVAL_SHARE else None
+    to_narrow = MANOEUVRES[(LAG_KEY, "time_constant")] if share > NARROW_INTERVAL_SHARE else None
     return {"time_constant_s": tau, "std_s": tau_std, "interval_95_share": share, "to_narrow": to_narrow,
             "explained": explained, "force_rms_N": force_rms,
             "kept": not reason, "reason": reason, "determined": not cases, "moves": moves}
@@ -458,9 +458,6 @@ def _scored_on(fitter: Fitter, cand: Candidate, rows: list[np.ndarray]) -> tuple
     held = cand.fit.held if cand.fit.held is not None else np.zeros(cand.fit.theta.size, dtype=bool)
     return fitter.scorer(axes, cand.problem.layout, held), float(axes.sum())
 
-
-#: a lag whose 95 % interval is wider than this share of its value on either side gets the manoeuvre that narrows it
-LAG_INTERVAL_SHARE = 0.10
 
 #: a chosen parameter that changes by more than this share (and two of its standard errors) when the lag is
 #: added depends on it (the acceptance figures ask parameters within 10 %)
