@@ -18,12 +18,12 @@ the values of the model that was scored, not those of a joint fit with what was 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from wall_env.effects import Effect
+from wall_env.effects import Effect, Parameter
 
 if TYPE_CHECKING:
     from discovery.fitting import Candidate, Fitter
@@ -68,22 +68,27 @@ def loose_parameters(effects: list[Effect], stds: list[dict]) -> list[dict]:
     "parameter", "value", "std", "interval_95_share", "manoeuvre"}``. A hold at one height, for instance, pins a
     ground effect's gain there and only loosely how it splits between the radius and the distance offset."""
     out = []
+    for effect, p, value, error in _entries(effects, stds):
+        size = float(np.linalg.norm(value))
+        for i in range(value.size if size > 0.0 else 0):
+            share = Z_95 * float(error[i]) / size
+            if np.isfinite(share) and share > NARROW_INTERVAL_SHARE:
+                index = i if p.size > 1 else None
+                out.append({"effect": effect.name, "parameter": p.name if index is None else f"{p.name}[{i}]",
+                            "value": float(value[i]), "std": float(error[i]), "interval_95_share": share,
+                            "manoeuvre": determining_manoeuvre(effect.name, p.name, index)})
+    return out
+
+
+def _entries(effects: list[Effect], stds: list[dict]) -> Iterator[tuple[Effect, Parameter, np.ndarray, np.ndarray]]:
+    """Each parameter of ``effects`` with its values and standard errors as arrays (NaN errors where ``stds`` has
+    none of the parameter's size)."""
     for effect, std in zip(effects, stds):
         values = effect.params_dict()
         for p in effect.parameters:
             value = np.atleast_1d(np.asarray(values[p.name], dtype=float))
             error = np.atleast_1d(np.asarray(std.get(p.name, np.nan), dtype=float))
-            size = float(np.linalg.norm(value))
-            if error.size != value.size or size == 0.0:
-                continue
-            for i in range(value.size):
-                share = Z_95 * float(error[i]) / size
-                if np.isfinite(share) and share > NARROW_INTERVAL_SHARE:
-                    index = i if p.size > 1 else None
-                    out.append({"effect": effect.name, "parameter": p.name if index is None else f"{p.name}[{i}]",
-                                "value": float(value[i]), "std": float(error[i]), "interval_95_share": share,
-                                "manoeuvre": determining_manoeuvre(effect.name, p.name, index)})
-    return out
+            yield effect, p, value, error if error.size == value.size else np.full(value.size, np.nan)
 
 
 class Undetermined(dict):
@@ -119,25 +124,19 @@ def _reason(value: float, std: float, low: float, high: float, null: float | Non
 def undetermined_cases(effects: list[Effect], stds: list[dict]) -> list[Undetermined]:
     """Every parameter entry the flight did not determine (see the module text)."""
     cases = []
-    for effect, std in zip(effects, stds):
-        values = effect.params_dict()
-        for p in effect.parameters:
-            value = np.atleast_1d(np.asarray(values[p.name], dtype=float))
-            error = np.atleast_1d(np.asarray(std.get(p.name, np.nan), dtype=float))
-            if error.size != value.size:
-                error = np.full(value.size, np.nan)
-            null = null_value(effect.name, p.name)
-            for i in range(value.size):
-                reason = _reason(float(value[i]), float(error[i]), p.low, p.high, null)
-                if reason is None:
-                    continue
-                index = i if p.size > 1 else None
-                nullable = p.size > 1 or p.name == "offset"
-                cases.append(Undetermined(
-                    effect=effect.name, parameter=p.name if index is None else f"{p.name}[{i}]", name=p.name,
-                    index=index, value=float(value[i]), std=float(error[i]), reason=reason,
-                    action=f"set to {null or 0.0:g} in the model file" if nullable else "effect left out of the model file",
-                    manoeuvre=determining_manoeuvre(effect.name, p.name, index)))
+    for effect, p, value, error in _entries(effects, stds):
+        null = null_value(effect.name, p.name)
+        for i in range(value.size):
+            reason = _reason(float(value[i]), float(error[i]), p.low, p.high, null)
+            if reason is None:
+                continue
+            index = i if p.size > 1 else None
+            nullable = p.size > 1 or p.name == "offset"
+            cases.append(Undetermined(
+                effect=effect.name, parameter=p.name if index is None else f"{p.name}[{i}]", name=p.name,
+                index=index, value=float(value[i]), std=float(error[i]), reason=reason,
+                action=f"set to {null or 0.0:g} in the model file" if nullable else "effect left out of the model file",
+                manoeuvre=determining_manoeuvre(effect.name, p.name, index)))
     return cases
 
 
