@@ -775,11 +775,12 @@ class Discovery:
         where = (f"a rotor reached {1e3 * -closest:.3g} mm past the ceiling plane (scene.ceiling_z may be that much "
                  "low, or the height estimate off)" if closest < 0 else
                  f"the rotors came within {1e3 * closest:.3g} mm of the ceiling")
-        return (f"{log.source}: {hung_s:.1f} s of {log.duration:.1f} s held at the ceiling, with "
-                f"{next_to_s:.1f} s next to it no more than {100 * CONTACT_HEIGHT:.0f} cm below the height it hung at "
-                f"and the thrust below the weight: the thrust carries less than {100 * REST_THRUST_SHARE:.0f} % of "
-                f"the weight and the vehicle does not fall; {where}. Drawn up by its own ceiling effect, it is in "
-                "contact with the ceiling or nearer it than any image-rotor form is trusted: left out")
+        beside = (f", with the {next_to_s:.1f} s next to it (the thrust below the weight, no more than "
+                  f"{100 * CONTACT_HEIGHT:.0f} cm below where it hung)" if next_to_s > 0 else "")
+        return (f"{log.source}: {hung_s:.1f} s of {log.duration:.1f} s held at the ceiling: the thrust carries less "
+                f"than {100 * REST_THRUST_SHARE:.0f} % of the weight and the vehicle does not fall; {where}. Drawn up "
+                "by its own ceiling effect, it is in contact with the ceiling or nearer it than any image-rotor form "
+                f"is trusted: left out{beside}")
 
     def _checked_scene(self, data: FlightData, airborne: list[FlightLog]
                        ) -> tuple[FlightData, list[FlightLog], set[str]]:
