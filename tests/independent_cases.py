@@ -189,9 +189,15 @@ def judge(case: Case, report: dict) -> dict:
     must_say = excess is not None and excess > UNEXPLAINED_SHARE * WEIGHT
     said_where = bool(unexplained and unexplained.get("where"))
     where_text = json.dumps(unexplained or {})
-    loose = {f"{x['effect']}.{x['parameter']}" for x in report.get("loose") or []}
+    # the report says a parameter is uncertain when it calls it loose, undetermined (nulled), or names it in a limit
+    # (a lag it cannot tell from it)
+    said = {f"{x['effect']}.{x['parameter']}".split("[")[0] for x in (report.get("loose") or []) +
+            (report.get("undetermined") or [])}
+    said |= {f"{effect}.{key}" for limit in report.get("limits") or [] for effect in limit["effects"]
+             for name, truth in case.expected.items() if name == effect for key in truth
+             if f"{effect} {key}" in limit["reason"]}
     if lag.get("to_narrow"):
-        loose.add("motor_lag.time_constant")
+        said.add("motor_lag.time_constant")
     off = sorted(k for k, e in errors.items() if e is not None and e > 0.10)
     return {
         "case": case.name,
@@ -201,7 +207,7 @@ def judge(case: Case, report: dict) -> dict:
         "missing": sorted(expected - set(named)),
         "param_errors": errors,
         "params_within_10_percent": all(e is not None and e <= 0.10 for e in errors.values()),
-        "off_said_loose": {k: k in loose for k in off},  # parameters more than 10 % off: did the report say loose?
+        "off_said_loose": {k: k in said for k in off},  # parameters more than 10 % off: did the report say so?
         "gap_before_N": before,
         "gap_after_N": after,
         "gap_not_worse": after is None or before is None or after <= before,
@@ -311,7 +317,7 @@ def main(argv: list[str] | None = None) -> int:
           f"all parameters within 10 %: {sum(r['named_right'] and r['params_within_10_percent'] for r in singles)}; "
           f"gap never above the nominal's: {sum(r['gap_not_worse'] for r in singles)}/{len(singles)}; "
           f"unexplained said right: {sum(r['unexplained_ok'] for r in singles)}/{len(singles)}; "
-          f"parameters more than 10 % off said loose: {sum(sum(r['off_said_loose'].values()) for r in singles)}/"
+          f"parameters more than 10 % off said uncertain: {sum(sum(r['off_said_loose'].values()) for r in singles)}/"
           f"{sum(len(r['off_said_loose']) for r in singles)}")
     if args.json:
         Path(args.json).write_text(json.dumps(records, indent=2, default=str))
