@@ -207,7 +207,7 @@ def judge(case: Case, report: dict) -> dict:
         "missing": sorted(expected - set(named)),
         "param_errors": errors,
         "params_within_10_percent": all(e is not None and e <= 0.10 for e in errors.values()),
-        "off_said_loose": {k: k in said for k in off},  # parameters more than 10 % off: did the report say so?
+        "off_said_uncertain": {k: k in said for k in off},  # parameters more than 10 % off: did the report say so?
         "gap_before_N": before,
         "gap_after_N": after,
         "gap_not_worse": after is None or before is None or after <= before,
@@ -317,8 +317,8 @@ def main(argv: list[str] | None = None) -> int:
           f"all parameters within 10 %: {sum(r['named_right'] and r['params_within_10_percent'] for r in singles)}; "
           f"gap never above the nominal's: {sum(r['gap_not_worse'] for r in singles)}/{len(singles)}; "
           f"unexplained said right: {sum(r['unexplained_ok'] for r in singles)}/{len(singles)}; "
-          f"parameters more than 10 % off said uncertain: {sum(sum(r['off_said_loose'].values()) for r in singles)}/"
-          f"{sum(len(r['off_said_loose']) for r in singles)}")
+          f"parameters more than 10 % off said uncertain: {sum(sum(r['off_said_uncertain'].values()) for r in singles)}/"
+          f"{sum(len(r['off_said_uncertain']) for r in singles)}")
     if args.json:
         Path(args.json).write_text(json.dumps(records, indent=2, default=str))
     return 0

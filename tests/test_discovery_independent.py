@@ -160,6 +160,23 @@ def test_no_lag_is_kept_beside_a_structure_the_library_cannot_describe(tmp_path)
     assert found.unexplained_ is not None and found.unexplained_["where"]["regressor"] == "height above ground"
 
 
+def test_the_second_simulators_judge_counts_a_parameter_off_as_said_only_when_the_report_says_so():
+    """``python -m tests.independent_cases`` counts the parameters more than 10 % off that the report called
+    uncertain: loose, undetermined, or named in a limit. One it wrote with a narrow interval is not said."""
+    from tests.independent_cases import Case, judge
+
+    case = Case("x", {}, {}, {"ground_effect": {"radius": 0.08, "offset": 0.012}, "linear_drag": {"D": [0.3, 0.3, 0.4]}})
+    report = {"effects": [{"name": "ground_effect", "params": {"radius": 0.0802, "offset": 0.0194}},
+                          {"name": "linear_drag", "params": {"D": [0.3, 0.3, 0.22]}}],
+              "gap_before": {"force_rms_N": 0.5}, "gap_after": {"force_rms_N": 0.02}, "noise": {"floor_N": 0.02},
+              "loose": [], "undetermined": [], "limits": []}
+    assert judge(case, report)["off_said_uncertain"] == {"ground_effect.offset": False, "linear_drag.D": False}
+    report["loose"] = [{"effect": "ground_effect", "parameter": "offset"}]
+    report["limits"] = [{"effects": ["motor_lag", "linear_drag"], "reason": "a motor lag of 31 ms fits, and with it "
+                         "linear_drag D[2] would be 0.39 instead of 0.22: the flight cannot tell the lag from it"}]
+    assert judge(case, report)["off_said_uncertain"] == {"ground_effect.offset": True, "linear_drag.D": True}
+
+
 def test_the_rows_a_start_error_reaches_are_the_first_of_its_segment(tmp_path):
     """The rows left out when a lag is scored: those within half a smoothing window plus a few time constants of
     a segment's first sample, and no others."""
