@@ -135,8 +135,8 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
     if selection is None:  # nothing to fit
         report = {"effects": [], "motor_lag": None, "gap_before": found.gap_before_, "gap_after": found.gap_after_,
                   "model": None if model_path is None else str(model_path), "noise": found.noise_,
-                  "unexplained": None, "withheld": None, "flights": found.flights_,
-                  "closed_loop": closed_loop, "notes": list(found.notes_), "limits": list(found.limits_),
+                  "unexplained": None, "withheld": None, "loose": [], "left_out": found.left_out_,
+                  "flights": found.flights_, "closed_loop": closed_loop, "notes": list(found.notes_), "limits": list(found.limits_),
                   "details": {"logs": _logs(found), "runtime_s": round(found.runtime_s_, 3)}}
         return _clean(report)
     details = {

@@ -163,6 +163,9 @@ def test_discover_runs_on_px4_logs_and_says_what_limits_it(ulog, expect, vehicle
     assert report["limits"], "the report says what the flight cannot determine"
     assert all(limit["manoeuvre"] for limit in report["limits"])
     assert "cannot determine wall_suction" in out or "nothing to fit" in out
+    if ulog == GROUND:  # on the ground from start to end: the report says which stretch was left out, and why
+        (left,) = report["left_out"]
+        assert left["reason"] == "held up" and left["seconds"] > 0.99 * report["details"]["logs"][0]["duration_s"]
 
 
 def test_px4_spin_up_and_touchdown_are_ground_contact_not_aerodynamics(vehicle_and_scene, tmp_path):
