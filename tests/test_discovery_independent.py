@@ -317,7 +317,7 @@ def test_a_ceiling_flown_nearer_than_its_form_is_trusted_is_fitted_beyond_that(t
 
 def test_a_vehicle_drawn_onto_the_ceiling_is_left_out_as_held_at_the_ceiling_not_as_ground_contact(tmp_path,
                                                                                                     monkeypatch):
-    """Where the image-rotor gain levels off only at 0.3 radii (up to 3.3 times the thrust), a survey 9 cm under the
+    """Where the image-rotor gain levels off only at 0.3 radii (up to 3.3 times the thrust), a survey 8 cm under the
     ceiling is drawn up onto it again and again and hangs there on less than half its weight. That was reported as
     "held up" and, for 29 s of the 60, as "ground contact" (the stretch next to a rest was extended for as long as
     the vehicle stayed no *higher* than it hung, so the whole way down): the ceiling radius came out 8.8 % small and
