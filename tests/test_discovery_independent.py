@@ -160,6 +160,23 @@ def test_no_lag_is_kept_beside_a_structure_the_library_cannot_describe(tmp_path)
     assert found.unexplained_ is not None and found.unexplained_["where"]["regressor"] == "height above ground"
 
 
+def test_the_second_simulators_wall_guard_stops_a_light_vehicle_that_suction_pulls_through_the_wall(monkeypatch):
+    """At 0.6 kg the near-wall loop (12 N/m) loses to suction (2 k_s, 13 N/m here) and the vehicle is pulled through
+    the wall, which this simulator lets pass by default; with ``WALL_GUARD_RADIUS`` the rotors' guards stop at it."""
+    import tests.independent_sim as sim
+    from tests.independent_cases import WALL
+
+    def closest(guard: float | None) -> float:
+        monkeypatch.setattr(sim, "WALL_GUARD_RADIUS", guard)
+        rows = fly({"suction": (6.56, 0.124)}, duration=20.0, rate_hz=100.0, seed=7786, **WALL)
+        return min(min((np.asarray(p) + sim._R(np.asarray(q)) @ r)[0] for r in sim.ROTORS_BODY)
+                   for _, p, _, q, *_ in rows)
+
+    monkeypatch.setattr(sim, "MASS", 0.6)
+    assert closest(None) < -0.03  # through the wall
+    assert 0.05 - 0.005 < closest(0.05) < 0.05  # pressed into the guard's spring by at most 5 mm
+
+
 def test_the_second_simulators_judge_counts_a_parameter_off_as_said_only_when_the_report_says_so():
     """``python -m tests.independent_cases`` counts the parameters more than 10 % off that the report called
     uncertain: loose, undetermined, or named in a limit. One it wrote with a narrow interval is not said."""
