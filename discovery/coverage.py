@@ -13,11 +13,11 @@ Two checks that make a report say *why* it could or could not say more:
   the touchdown before they stop, next to a rest: near the height the vehicle rested
   at, with the thrust below the weight. The ground still carries part of the weight
   (the thrust ramps from half the weight to all of it), so these are left out too.
-- :func:`at_ceiling`: which of those samples are at the ceiling rather than on the
-  ground. A vehicle can be held *up* there too: drawn to the ceiling by its rotors'
-  own ceiling effect, with the thrust cut below half the weight, it stays. That is
-  contact with the ceiling or a gain nearer the ceiling than any image-rotor form is
-  trusted (:mod:`discovery.form_range`), so it is left out as well, under its own name.
+- :func:`at_ceiling`: where a rest is at the ceiling rather than on the ground. A
+  vehicle can be held *up* there too: drawn to the ceiling by its rotors' own ceiling
+  effect, with the thrust cut below half the weight, it stays. That is contact with the
+  ceiling or a gain nearer the ceiling than any image-rotor form is trusted
+  (:mod:`discovery.form_range`), so it is left out as well, under its own name.
 - :func:`scene_problems`: a rotor behind a wall, below the ground or above the
   ceiling means the scene (sidecar or scene file) is wrong, not the physics: the
   note says which surface and the fix (flip a wall normal, move a point, lower
@@ -34,6 +34,7 @@ import numpy as np
 
 from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
+from discovery.regressors import surface_clearances
 
 __all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "resting_on_ground", "ground_contact", "at_ceiling", "rotor_clearances",
            "flight_limits", "nearest_wall", "thrust_variation", "scene_problems"]
@@ -85,7 +86,7 @@ def ground_contact(log: FlightLog) -> tuple[np.ndarray, np.ndarray]:
     vertical = thrust * log.R_body_to_world[:, 2, 2]
     weight = log.vehicle.mass * log.gravity
     height = log.p_world[:, 2]
-    ceiling = at_ceiling(log, resting)
+    ceiling = at_ceiling(log)
     dt = float(np.median(np.diff(log.t)))
     centre = max(1, int(round(CONTACT_CENTRE_S / dt)))
     edges = np.flatnonzero(np.diff(resting.astype(int)))  # index before each change
@@ -113,23 +114,22 @@ def ground_contact(log: FlightLog) -> tuple[np.ndarray, np.ndarray]:
     return resting, contact
 
 
-def at_ceiling(log: FlightLog, samples: np.ndarray) -> np.ndarray:
-    """Which of ``samples`` (a mask) the vehicle spent at the ceiling rather than on the ground: the scene has a
-    ceiling, the highest rotor is within :data:`NEAR_SURFACE` of it and nearer it than the lowest rotor is to the
-    ground (when the scene has one)."""
+def at_ceiling(log: FlightLog) -> np.ndarray:
+    """The samples at which the vehicle is at the ceiling rather than on the ground: the scene has a ceiling, the
+    highest rotor is within :data:`NEAR_SURFACE` of it and nearer it than the lowest rotor is to the ground (when the
+    scene has one). A rest (:func:`ground_contact`) at such samples is held at the ceiling."""
     below_ceiling, above_ground = rotor_clearances(log)
-    return samples & (below_ceiling < NEAR_SURFACE) & (below_ceiling < above_ground)
+    return (below_ceiling < NEAR_SURFACE) & (below_ceiling < above_ground)
 
 
 def rotor_clearances(log: FlightLog) -> tuple[np.ndarray, np.ndarray]:
-    """``(below_ceiling, above_ground)`` (m) at every sample: the highest rotor's distance under the ceiling and the
-    lowest rotor's height above the ground, inf where the scene has no such surface; negative past the plane."""
+    """``(below_ceiling, above_ground)`` (m) at every sample (:func:`discovery.regressors.surface_clearances`), inf
+    where the scene has no such surface."""
     rotor_z = log.p_world[:, None, 2] + np.einsum("nj,rj->nr", log.R_body_to_world[:, 2, :],
                                                    log.vehicle.rotor_positions_array)
+    above_ground, below_ceiling = surface_clearances(rotor_z, log.scene)
     never = np.full(log.n_samples, np.inf)
-    below_ceiling = log.scene.ceiling_z - rotor_z.max(axis=1) if log.scene.ceiling_z is not None else never
-    above_ground = rotor_z.min(axis=1) - log.scene.ground_z if log.scene.ground_z is not None else never
-    return below_ceiling, above_ground
+    return (never if below_ceiling is None else below_ceiling), (never if above_ground is None else above_ground)
 
 
 def nearest_wall(regressors: list) -> float | None:

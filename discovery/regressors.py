@@ -74,10 +74,11 @@ def regressors(data: FlightData) -> list[Regressor]:
             add("nearest rotor distance to the structure", "m", s, d.min(axis=1))
             for j in range(4):
                 add(f"rotor {j} distance to the structure", "m", s, d[:, j])
-        if seg.scene.ground_z is not None:
-            add("height above ground", "m", s, rotor_world[:, :, 2].min(axis=1) - seg.scene.ground_z)
-        if seg.scene.ceiling_z is not None:
-            add("distance to ceiling", "m", s, seg.scene.ceiling_z - rotor_world[:, :, 2].max(axis=1))
+        above_ground, below_ceiling = surface_clearances(rotor_world[:, :, 2], seg.scene)
+        if above_ground is not None:
+            add("height above ground", "m", s, above_ground)
+        if below_ceiling is not None:
+            add("distance to ceiling", "m", s, below_ceiling)
         add("speed", "m/s", s, np.linalg.norm(seg.states.v_world, axis=1))
         v_body = np.einsum("nji,nj->ni", R, seg.states.v_world)
         for axis, label in enumerate("xyz"):
@@ -85,6 +86,15 @@ def regressors(data: FlightData) -> list[Regressor]:
         add("thrust", "N", s, seg.thrust)
         add("time", "s", s, seg.t)
     return [Regressor(name, unit, np.concatenate(parts)) for (name, unit), parts in per_segment.items()]
+
+
+def surface_clearances(rotor_z: np.ndarray, scene: Any) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """``(above_ground, below_ceiling)`` (m) from the rotors' heights ``rotor_z`` ``(n, rotors)``: the lowest rotor's
+    height above the ground and the highest rotor's distance under the ceiling, negative past the plane; None where
+    the scene has no such surface."""
+    above_ground = rotor_z.min(axis=1) - scene.ground_z if scene.ground_z is not None else None
+    below_ceiling = scene.ceiling_z - rotor_z.max(axis=1) if scene.ceiling_z is not None else None
+    return above_ground, below_ceiling
 
 
 def _bins(x: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray]:

@@ -740,7 +740,8 @@ class Discovery:
         for log in logs:
             resting, contact = ground_contact(log)
             dt = float(np.median(np.diff(log.t)))
-            hung, near_ceiling = at_ceiling(log, resting), at_ceiling(log, contact)
+            ceiling = at_ceiling(log)
+            hung, near_ceiling = resting & ceiling, contact & ceiling
             resting_low, contact_low = resting & ~hung, contact & ~near_ceiling
             if resting_low.any():
                 self.notes_.append(
