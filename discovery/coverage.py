@@ -48,8 +48,7 @@ THRUST_VARIATION = 0.1  # relative standard deviation of the thrust that separat
 
 def resting_on_ground(log: FlightLog) -> np.ndarray:
     """Samples where something other than the thrust holds the vehicle up (see the module text)."""
-    thrust = log.rotor_thrusts.sum(axis=1) if log.rotor_thrusts is not None else log.thrust_cmd
-    vertical = thrust * log.R_body_to_world[:, 2, 2]
+    vertical = log.total_thrust * log.R_body_to_world[:, 2, 2]
     weight = log.vehicle.mass * log.gravity
     dt = float(np.median(np.diff(log.t)))
     window = max(1, int(round(0.5 / dt)))
@@ -82,8 +81,7 @@ def ground_contact(log: FlightLog) -> tuple[np.ndarray, np.ndarray]:
     contact = np.zeros_like(resting)
     if not resting.any() or resting.all():
         return resting, contact
-    thrust = log.rotor_thrusts.sum(axis=1) if log.rotor_thrusts is not None else log.thrust_cmd
-    vertical = thrust * log.R_body_to_world[:, 2, 2]
+    vertical = log.total_thrust * log.R_body_to_world[:, 2, 2]
     weight = log.vehicle.mass * log.gravity
     height = log.p_world[:, 2]
     ceiling = at_ceiling(log)

@@ -252,6 +252,11 @@ class FlightLog:
         """Rotation matrices ``(n, 3, 3)`` of the (normalised) quaternions."""
         return quaternions_to_matrices(self.q_body_to_world)
 
+    @property
+    def total_thrust(self) -> np.ndarray:
+        """``(n,)`` N: the rotors' logged thrusts summed where the log has them, else the commanded thrust."""
+        return self.rotor_thrusts.sum(axis=1) if self.rotor_thrusts is not None else self.thrust_cmd
+
     def segments(self) -> list[slice]:
         """Contiguous stretches without gaps longer than :data:`GAP_FACTOR` median periods, counted in whole periods:
         a step of exactly three (two samples dropped) came out a rounding error longer and split a 250 Hz log with
