@@ -16,7 +16,8 @@ One straight pipeline, each step in its own module:
 
 1. **load** the logs (:mod:`discovery.flight_log`);
 2. **segments**: leave out what is not aerodynamic (held up by the ground or a hand, and the
-   rotors spinning up or down on the ground, :mod:`discovery.coverage`) and cut the logs into
+   rotors spinning up or down on the ground, :mod:`discovery.coverage`; in contact with a wall the
+   vehicle struck, :mod:`discovery.wall_contact`) and cut the logs into
    gap-free segments with their cross-validation folds (:mod:`discovery.residuals`);
 3. **residuals**: the force residual of paper Eq. 28 at every sample against the nominal
    model (:mod:`discovery.residuals`), and a scene that cannot be right (a rotor behind a
@@ -91,6 +92,7 @@ from discovery.selection import (
 from discovery.standins import OWN_QUANTITIES, depends_on, own_quantity, structures_for, test_effect
 from discovery.thrust_map import ThrustMap, written_effects
 from discovery.unexplained import is_unexplained, where_it_lives
+from discovery.wall_contact import CONTACT_MARGIN, SAME_DISTANCE, STRIKE_WINDOW_S, STRIKE_Z, wall_strikes
 from discovery.wall_extent import BoundedWall, find_edge, plain_wall, side_gains
 from wall_env.effects import EFFECTS, Effect, make_effect
 from wall_env.effects.ground import FORM_TRUSTED_FROM_RADII
@@ -100,6 +102,7 @@ __all__ = ["Discovery", "DEFAULT_WINDOW_S", "DEFAULT_BLOCK_S"]
 
 EDGE_STEPS_M = (0.04, 0.02, 0.01, 0.005)  # m, the steps of the search that places a wall's edge on held-out data
 EDGE_MOVES = 3  # moves at each step at most
+MAX_TIMES_LISTED = 5  # strike times a note lists before it says how many more
 
 
 def _rms(x: np.ndarray) -> float:
@@ -740,6 +743,8 @@ class Discovery:
         for log in logs:
             resting, contact = ground_contact(log)
             dt = float(np.median(np.diff(log.t)))
+            on_wall = self._wall_contact(log, resting | contact, dt)
+            resting, contact = resting & ~on_wall, contact & ~on_wall
             ceiling = at_ceiling(log)
             hung, near_ceiling = resting & ceiling, contact & ceiling
             resting_low, contact_low = resting & ~hung, contact & ~near_ceiling
@@ -762,12 +767,43 @@ class Discovery:
                 if mask.any():
                     self.left_out_.append({"log": log.source, "reason": why, "seconds": round(float(mask.sum() * dt), 3),
                                            "time_intervals": _intervals(log.t, mask)})
-            left_out = resting | contact
+            if on_wall.any():
+                self.left_out_.append({"log": log.source, "reason": "wall contact",
+                                       "seconds": round(float(on_wall.sum() * dt), 3),
+                                       "time_intervals": _intervals(log.t, on_wall)})
+            left_out = resting | contact | on_wall
             if (~left_out).sum() >= 2 and not left_out.all():
                 kept = log.select(~left_out)
                 if kept.duration >= shortest:
                     airborne.append(kept)
         return airborne
+
+    def _wall_contact(self, log: FlightLog, held: np.ndarray, dt: float) -> np.ndarray:
+        """The samples ``log`` spent in contact with a wall it struck (:func:`discovery.wall_contact.wall_strikes`),
+        with a note per wall. A stretch ``held`` up (a rest, or the touchdown next to it) that reaches into the
+        contact is the wall's friction holding the vehicle, not the ground, and counts as wall contact too."""
+        on_wall = np.zeros(log.n_samples, dtype=bool)
+        for struck in wall_strikes(log):
+            on_wall |= struck.in_contact
+            at = ", ".join(f"{t:.2f}" for t in struck.times[:MAX_TIMES_LISTED])
+            more = f" and {len(struck.times) - MAX_TIMES_LISTED} more" if len(struck.times) > MAX_TIMES_LISTED else ""
+            self.notes_.append(
+                f"{log.source}: the vehicle struck wall {struck.wall} {len(struck.times)} times (t = {at}{more} s): "
+                f"each time pushed away from the wall more than {STRIKE_Z:g} times the log's own scatter beyond what "
+                f"the thrust does, within {1e3 * STRIKE_WINDOW_S:g} ms, and within {1e3 * SAME_DISTANCE:g} mm of its "
+                f"closest approach (the nearest rotor centre {1e3 * struck.closest:.1f} mm from the plane). "
+                f"{struck.in_contact.sum() * dt:.1f} s with a rotor centre nearer than "
+                f"{1e3 * struck.touch_distance:.1f} mm are left out as wall contact: the wall pushes the vehicle "
+                "there, and may hold it up, a force that is not aerodynamic; suction nearer the wall than that is "
+                "not determined by this flight (a guard's reach, if the vehicle has guards, is about "
+                f"{1e3 * (struck.touch_distance - CONTACT_MARGIN):.0f} mm)")
+        if not on_wall.any():
+            return on_wall
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int), [0]])))
+        for a, b in zip(edges[::2], edges[1::2]):
+            if on_wall[a:b].any():
+                on_wall[a:b] = True
+        return on_wall
 
     @staticmethod
     def _held_at_ceiling(log: FlightLog, samples: np.ndarray, hung_s: float, next_to_s: float) -> str:

@@ -1,0 +1,90 @@
+"""Strikes on a wall (:mod:`discovery.wall_contact`): told apart from a survey that turns back at one distance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from discovery.flight_log import FlightLog, NominalVehicle
+from discovery.wall_contact import CONTACT_MARGIN, SAME_DISTANCE, STRIKE_WINDOW_S, outward_jolt, wall_strikes
+from wall_env.scene import Scene, Wall
+from wall_env.vehicle import VehicleParams
+
+RATE_HZ = 100.0
+MASS = 1.3
+G = 9.81
+PERIOD_S = 4.0  # the survey's period toward and away from the wall
+AMPLITUDE = 0.1  # m
+STOP = 0.047  # m: the nearest rotor centre's distance from the wall plane where the wall stops the vehicle
+VELOCITY_NOISE = 0.003  # m/s
+
+
+def _survey(depth: float, seed: int = 0) -> tuple[FlightLog, np.ndarray]:
+    """A vehicle flying toward and away from a wall at x = 0 (normal +x): its loop (a PD on position, the thrust
+    tilted to give the acceleration it asks) steers a sinusoid whose turning point lies ``depth`` past where the
+    wall stops it (negative: short of it). Where the vehicle would pass the stop, the wall stops it dead and holds
+    it while the loop pushes on toward the wall; it leaves once the loop pulls it away. Returns the log (velocity
+    with noise) and the samples the wall held."""
+    vehicle = NominalVehicle.from_vehicle_params(VehicleParams(mass=MASS))
+    rotor_x = vehicle.rotor_positions_array[:, 0]  # body x; tilted about body y, a rotor sits at x cos(tilt)
+    x_stop = STOP - float(rotor_x.min())  # where the vehicle stops when level
+    t = np.arange(int(20.0 * RATE_HZ)) / RATE_HZ
+    omega, dt = 2 * np.pi / PERIOD_S, 1.0 / RATE_HZ
+    x_ref = x_stop - depth + AMPLITUDE * (1 + np.cos(omega * t))  # from the far end, turning at 2, 6, ... s
+    v_ref = -AMPLITUDE * omega * np.sin(omega * t)
+    a_ref = -AMPLITUDE * omega ** 2 * np.cos(omega * t)
+    x, v, a = np.zeros(len(t)), np.zeros(len(t)), np.zeros(len(t))
+    held = np.zeros(len(t), dtype=bool)
+    x[0], v[0] = x_ref[0], v_ref[0]
+    for k in range(len(t)):
+        a[k] = a_ref[k] + 4.0 * (x_ref[k] - x[k]) + 4.0 * (v_ref[k] - v[k])
+        if k + 1 < len(t):
+            v[k + 1], x[k + 1] = v[k] + a[k] * dt, x[k] + (v[k] + 0.5 * a[k] * dt) * dt
+            stop = STOP - float((rotor_x * np.cos(np.arctan2(a[k], G))).min())  # the nearest rotor at STOP
+            if x[k + 1] < stop:  # the wall: stopped dead (a strike), held while the loop pushes toward it
+                x[k + 1], v[k + 1], held[k + 1] = stop, 0.0, True
+    v_measured = v + np.random.default_rng(seed).normal(0.0, VELOCITY_NOISE, len(t))
+    tilt = np.arctan2(a, G)  # about body y: the thrust's x share gives a, its z share the weight
+    q = np.column_stack([np.cos(tilt / 2), np.zeros_like(t), np.sin(tilt / 2), np.zeros_like(t)])
+    n = len(t)
+    log = FlightLog(t=t, p_world=np.column_stack([x, np.zeros(n), np.full(n, 1.0)]),
+                    v_world=np.column_stack([v_measured, np.zeros(n), np.zeros(n)]), q_body_to_world=q,
+                    omega_body=np.zeros((n, 3)), thrust_cmd=MASS * np.hypot(G, a), omega_cmd_body=np.zeros((n, 3)),
+                    vehicle=vehicle, scene=Scene((Wall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)),), 0.0, None), gravity=G)
+    return log, held
+
+
+def test_the_outward_jolt_is_the_velocitys_change_beyond_the_thrusts():
+    """Free flight: the thrust explains every change of velocity and the jolt is noise. At a strike the velocity
+    goes from its approach speed to zero in one sample, which the jolt gives as that speed over its window."""
+    log, held = _survey(depth=0.005)
+    jolt = outward_jolt(log, np.array([1.0, 0.0, 0.0]))
+    free = np.isfinite(jolt)
+    free[np.flatnonzero(np.diff(held.astype(int))) + np.arange(-3, 4)[:, None]] = False  # away from every edge
+    window_s = 2 * round(STRIKE_WINDOW_S * RATE_HZ / 2) / RATE_HZ
+    noise = np.sqrt(2) * VELOCITY_NOISE / window_s  # two noisy velocities over the window
+    assert np.std(jolt[free]) < 1.2 * noise  # 1.8 times it with the thrust's acceleration left in
+    entry = np.flatnonzero(np.diff(held.astype(int)) == 1)[0] + 1  # the first sample the wall holds
+    speed = -(log.v_world[entry - 2, 0])  # about the approach speed just before
+    assert jolt[entry] == pytest.approx(speed / window_s, rel=0.25)
+
+
+def test_a_vehicle_the_wall_stops_again_and_again_is_in_contact_and_one_that_turns_back_short_of_it_is_not():
+    """Five strikes at 47 mm are found, one per pass, and every sample the wall held is in contact. A survey that
+    turns back just short of the wall every pass comes as near and stops at one distance too, but nothing pushes it
+    away harder than its thrust does: it is not taken for contact."""
+    log, held = _survey(depth=0.005)
+    (struck,) = wall_strikes(log)
+    assert struck.wall == 0
+    entries = log.t[np.flatnonzero(np.diff(held.astype(int)) == 1) + 1]
+    assert len(entries) == 5 and len(struck.times) == 5  # one per period of 4 s in 20 s
+    assert np.allclose(struck.times, entries, atol=2 * STRIKE_WINDOW_S)
+    assert struck.closest == pytest.approx(STOP, abs=1e-4)
+    assert STOP < struck.touch_distance <= STOP + SAME_DISTANCE + CONTACT_MARGIN
+    assert struck.in_contact[held].all()
+    survey, held = _survey(depth=-0.001)
+    assert not held.any()
+    rotors = survey.p_world[:, None, :] + np.einsum("nij,rj->nri", survey.R_body_to_world,
+                                                    survey.vehicle.rotor_positions_array)
+    assert survey.scene.walls[0].distance(rotors).min() < STOP + 0.002  # as near as the struck vehicle, within 2 mm
+    assert wall_strikes(survey) == []
