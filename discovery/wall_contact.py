@@ -16,6 +16,11 @@ so a fit that keeps these samples finds a wrong k_s and an unexplained force "ag
 thrust". :func:`wall_strikes` finds the strikes and the samples at or nearer than the
 distance they happened at; the workflow leaves those out with the reason "wall contact".
 
+Without an accelerometer column the jolt is read from the logged velocity; a velocity estimate
+smoothed over more than the jolt's window (a filtered motion-capture derivative, say 50 ms) spreads
+a strike too thin to find, and the contact is then fitted as a suction too weak. Log the
+acceleration (``ax, ay, az``) when the vehicle may touch a wall.
+
 The test is one-sided and needs repetition, so that steady flight close to a wall (a hold at
 a few centimetres, a survey that turns back at the same distance each pass) is not taken for
 contact: at least :data:`MIN_STRIKES` separate outward jolts of :data:`STRIKE_Z` robust
@@ -53,24 +58,28 @@ class WallStrikes:
     times: np.ndarray  # (strikes,) s: the strongest jolt of each strike
     closest: float  # m: the nearest rotor centre's closest approach to the wall plane
     touch_distance: float  # m: the farthest strike's distance plus CONTACT_MARGIN; nearer than this is contact
-    in_contact: np.ndarray  # (n,) bool: the nearest rotor centre nearer the wall than touch_distance
+    in_contact: np.ndarray  # (n,) bool: nearer the wall than touch_distance, or within STRIKE_WINDOW_S of it
 
 
 def outward_jolt(log: FlightLog, normal: np.ndarray) -> np.ndarray:
     """The acceleration along ``normal`` beyond the thrust's (m/s^2), each over about :data:`STRIKE_WINDOW_S`: the
-    change of the measured velocity over the window, less the thrust's acceleration averaged over it. NaN where the
-    window does not fit (the log's ends)."""
+    logged acceleration averaged over the window where the log has one (an accelerometer sees an impact whatever
+    filter the velocity estimate went through), else the change of the logged velocity over it; less the thrust's
+    acceleration averaged over the window. NaN where the window does not fit (the log's ends)."""
     n = log.n_samples
     dt = float(np.median(np.diff(log.t)))
     half = max(1, int(round(STRIKE_WINDOW_S / dt / 2)))
     jolt = np.full(n, np.nan)
     if n <= 2 * half:
         return jolt
-    v_n = log.v_world @ normal
     thrust_n = log.total_thrust * (log.R_body_to_world[:, :, 2] @ normal) / log.vehicle.mass
     inner = slice(half, n - half)
-    jolt[inner] = ((v_n[2 * half:] - v_n[:n - 2 * half]) / (log.t[2 * half:] - log.t[:n - 2 * half])
-                   - moving_average(thrust_n, 2 * half + 1)[inner])
+    if log.a_world is not None:
+        measured = moving_average(log.a_world @ normal, 2 * half + 1)[inner]
+    else:
+        v_n = log.v_world @ normal
+        measured = (v_n[2 * half:] - v_n[:n - 2 * half]) / (log.t[2 * half:] - log.t[:n - 2 * half])
+    jolt[inner] = measured - moving_average(thrust_n, 2 * half + 1)[inner]
     return jolt
 
 
@@ -80,6 +89,7 @@ def wall_strikes(log: FlightLog) -> list[WallStrikes]:
         return []
     rotors_world = log.p_world[:, None, :] + np.einsum("nij,rj->nri", log.R_body_to_world,
                                                        log.vehicle.rotor_positions_array)
+    dt = float(np.median(np.diff(log.t)))
     out = []
     for k, wall in enumerate(log.scene.walls):
         normal = np.asarray(wall.normal)
@@ -107,6 +117,10 @@ def wall_strikes(log: FlightLog) -> list[WallStrikes]:
             continue
         touch = float(distance[hits].max()) + CONTACT_MARGIN
         peaks = np.array([log.t[max(s, key=lambda i: jolt[i])] for s in strikes])
-        out.append(WallStrikes(wall=k, times=peaks, closest=closest, touch_distance=touch,
-                               in_contact=distance < touch))
+        # widened by the jolt's window on each side: a stiff guard bounces the vehicle off in a sample or two, too
+        # short a gap to cut the log there, and the residual's smoothing would carry the impulse into the samples
+        # kept on either side
+        pad = max(1, int(round(STRIKE_WINDOW_S / dt)))
+        in_contact = np.convolve((distance < touch).astype(float), np.ones(2 * pad + 1), mode="same") > 0
+        out.append(WallStrikes(wall=k, times=peaks, closest=closest, touch_distance=touch, in_contact=in_contact))
     return out

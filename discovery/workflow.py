@@ -740,6 +740,7 @@ class Discovery:
         shortest = minimum_duration(self.window_s, self.horizon_s)
         airborne = []
         self.left_out_: list[dict] = []
+        self._contact_limits: list[dict] = []
         for log in logs:
             resting, contact = ground_contact(log)
             dt = float(np.median(np.diff(log.t)))
@@ -797,6 +798,12 @@ class Discovery:
                 "there, and may hold it up, a force that is not aerodynamic; suction nearer the wall than that is "
                 "not determined by this flight (a guard's reach, if the vehicle has guards, is about "
                 f"{1e3 * (struck.touch_distance - CONTACT_MARGIN):.0f} mm)")
+            self._contact_limits.append({
+                "effects": ["wall_suction"],
+                "reason": f"{log.source} struck wall {struck.wall}; the samples nearer it than "
+                          f"{1e3 * struck.touch_distance:.0f} mm (rotor centre) are wall contact, left out, so suction "
+                          "there is not measured",
+                "manoeuvre": "approach the wall slowly and turn back short of touching it, at several distances"})
         if not on_wall.any():
             return on_wall
         edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int), [0]])))
@@ -857,6 +864,7 @@ class Discovery:
         r_nom = data.residuals(nominal.aero_model())
         self.regressors_ = regressors(data)
         self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]))
+        self.limits_ += self._contact_limits
 
         # 4: residual and where it is
         self.residual_before_ = data.concat(r_nom)

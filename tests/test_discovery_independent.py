@@ -199,6 +199,8 @@ def test_a_vehicle_that_strikes_the_wall_is_left_out_in_contact_and_the_suction_
     assert 50.0 < touch < 56.0  # the guard reaches 50 mm; the strikes stop the rotor centres 3-4 mm inside that
     assert found.names_ == ["wall_suction"]
     assert max(relative_errors(found.effects_[0].values, truth)) < 0.1
+    # suction nearer the wall than the strikes is not determined: a limit says so
+    assert any(limit["effects"] == ["wall_suction"] and "struck wall 0" in limit["reason"] for limit in found.limits_)
 
 
 def test_the_second_simulators_judge_counts_a_parameter_off_as_said_only_when_the_report_says_so():
