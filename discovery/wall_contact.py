@@ -25,7 +25,9 @@ The test is one-sided and needs repetition, so that steady flight close to a wal
 a few centimetres, a survey that turns back at the same distance each pass) is not taken for
 contact: at least :data:`MIN_STRIKES` separate outward jolts of :data:`STRIKE_Z` robust
 standard deviations of the log's own scatter, each within :data:`SAME_DISTANCE` of the
-closest approach.
+closest approach, and each after the vehicle came at the wall with at least
+:data:`APPROACH_SHARE` of the speed the jolt took away (a glitch in the velocity estimate
+during a hold jolts a vehicle that was not moving).
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ SAME_DISTANCE = 0.005  # m: strikes within this of the closest approach to a wal
 MIN_STRIKES = 2  # separate strikes (at least STRIKE_SEPARATION_S apart) before a wall is taken to be struck
 STRIKE_SEPARATION_S = 0.2  # s
 CONTACT_MARGIN = 0.002  # m past the farthest strike's distance that still counts as touching (the guard's give)
+APPROACH_SHARE = 0.5  # of the speed a jolt takes away, the least the vehicle came at the wall with before it
 SCATTER_FLOOR = 0.05  # m/s^2: the least scatter a jolt is measured against (a noise-free simulated log has none)
 
 
@@ -83,6 +86,16 @@ def outward_jolt(log: FlightLog, normal: np.ndarray) -> np.ndarray:
     return jolt
 
 
+def _was_approaching(log: FlightLog, normal: np.ndarray, i: int, jolt: float) -> bool:
+    """Whether the vehicle came at the wall before the jolt at sample ``i``: over the window before the jolt's own,
+    its mean speed toward the wall is at least half the speed the jolt took away (``jolt`` times its window). A
+    glitch in the velocity estimate, or a hold's noise, jolts a vehicle that was not moving."""
+    dt = float(np.median(np.diff(log.t)))
+    half = max(1, int(round(STRIKE_WINDOW_S / dt / 2)))
+    before = log.v_world[max(0, i - 3 * half):max(1, i - half), :] @ normal
+    return bool(-before.mean() >= APPROACH_SHARE * jolt * 2 * half * dt)
+
+
 def wall_strikes(log: FlightLog) -> list[WallStrikes]:
     """The walls of ``log.scene`` the vehicle struck (see the module text), each with its contact samples."""
     if log.n_samples < 3 or not log.scene.walls:
@@ -107,6 +120,7 @@ def wall_strikes(log: FlightLog) -> list[WallStrikes]:
         scatter = max(SCATTER_FLOOR, 1.4826 * float(np.median(np.abs(jolt[finite] - centre))))
         hits = np.flatnonzero(finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter)
                               & (distance < closest + SAME_DISTANCE))
+        hits = hits[[_was_approaching(log, normal, int(i), float(jolt[i])) for i in hits]]
         strikes: list[list[int]] = []
         for i in hits:
             if strikes and log.t[i] - log.t[strikes[-1][-1]] <= STRIKE_SEPARATION_S:
