@@ -16,8 +16,8 @@ One straight pipeline, each step in its own module:
 
 1. **load** the logs (:mod:`discovery.flight_log`);
 2. **segments**: leave out what is not aerodynamic (held up by the ground or a hand, and the
-   rotors spinning up or down on the ground, :mod:`discovery.coverage`; in contact with a wall the
-   vehicle struck, :mod:`discovery.wall_contact`) and cut the logs into
+   rotors spinning up or down on the ground, :mod:`discovery.coverage`; in contact with a wall or
+   the ceiling the vehicle struck, :mod:`discovery.surface_contact`) and cut the logs into
    gap-free segments with their cross-validation folds (:mod:`discovery.residuals`);
 3. **residuals**: the force residual of paper Eq. 28 at every sample against the nominal
    model (:mod:`discovery.residuals`), and a scene that cannot be right (a rotor behind a
@@ -62,6 +62,7 @@ from discovery.cancelling import manoeuvre as cancel_manoeuvre
 from discovery.coverage import (
     CONTACT_HEIGHT,
     NEAR_SURFACE,
+    NOT_FALLING,
     REST_THRUST_SHARE,
     at_ceiling,
     flight_limits,
@@ -90,9 +91,16 @@ from discovery.selection import (
     sequential_explained,
 )
 from discovery.standins import OWN_QUANTITIES, depends_on, own_quantity, structures_for, test_effect
+from discovery.surface_contact import (
+    CONTACT_MARGIN,
+    PRESSED_WINDOW_S,
+    SAME_DISTANCE,
+    STRIKE_WINDOW_S,
+    STRIKE_Z,
+    surface_strikes,
+)
 from discovery.thrust_map import ThrustMap, written_effects
 from discovery.unexplained import is_unexplained, where_it_lives
-from discovery.wall_contact import CONTACT_MARGIN, SAME_DISTANCE, STRIKE_WINDOW_S, STRIKE_Z, wall_strikes
 from discovery.wall_extent import BoundedWall, find_edge, plain_wall, side_gains
 from wall_env.effects import EFFECTS, Effect, make_effect
 from wall_env.effects.ground import FORM_TRUSTED_FROM_RADII
@@ -744,8 +752,9 @@ class Discovery:
         for log in logs:
             resting, contact = ground_contact(log)
             dt = float(np.median(np.diff(log.t)))
-            on_wall = self._wall_contact(log, resting | contact, dt)
-            resting, contact = resting & ~on_wall, contact & ~on_wall
+            touching = self._surface_contact(log, resting | contact, dt)
+            on_surface = np.logical_or.reduce([np.zeros(log.n_samples, dtype=bool), *touching.values()])
+            resting, contact = resting & ~on_surface, contact & ~on_surface
             ceiling = at_ceiling(log)
             hung, near_ceiling = resting & ceiling, contact & ceiling
             resting_low, contact_low = resting & ~hung, contact & ~near_ceiling
@@ -768,49 +777,61 @@ class Discovery:
                 if mask.any():
                     self.left_out_.append({"log": log.source, "reason": why, "seconds": round(float(mask.sum() * dt), 3),
                                            "time_intervals": _intervals(log.t, mask)})
-            if on_wall.any():
-                self.left_out_.append({"log": log.source, "reason": "wall contact",
-                                       "seconds": round(float(on_wall.sum() * dt), 3),
-                                       "time_intervals": _intervals(log.t, on_wall)})
-            left_out = resting | contact | on_wall
+            for why, mask in touching.items():
+                self.left_out_.append({"log": log.source, "reason": why, "seconds": round(float(mask.sum() * dt), 3),
+                                       "time_intervals": _intervals(log.t, mask)})
+            left_out = resting | contact | on_surface
             if (~left_out).sum() >= 2 and not left_out.all():
                 kept = log.select(~left_out)
                 if kept.duration >= shortest:
                     airborne.append(kept)
         return airborne
 
-    def _wall_contact(self, log: FlightLog, held: np.ndarray, dt: float) -> np.ndarray:
-        """The samples ``log`` spent in contact with a wall it struck (:func:`discovery.wall_contact.wall_strikes`),
-        with a note per wall. A stretch ``held`` up (a rest, or the touchdown next to it) that reaches into the
-        contact is the wall's friction holding the vehicle, not the ground, and counts as wall contact too."""
-        on_wall = np.zeros(log.n_samples, dtype=bool)
-        for struck in wall_strikes(log):
-            on_wall |= struck.in_contact
-            at = ", ".join(f"{t:.2f}" for t in struck.times[:MAX_TIMES_LISTED])
-            more = f" and {len(struck.times) - MAX_TIMES_LISTED} more" if len(struck.times) > MAX_TIMES_LISTED else ""
+    def _surface_contact(self, log: FlightLog, held: np.ndarray, dt: float) -> dict[str, np.ndarray]:
+        """The samples ``log`` spent in contact with a wall or the ceiling it struck
+        (:func:`discovery.surface_contact.surface_strikes`), by left-out reason ("wall contact", "ceiling contact"),
+        with a note and a limit per surface. A stretch ``held`` up (a rest, or the moments next to it) that reaches
+        into the contact is the surface holding the vehicle (friction on a wall), and counts as its contact too."""
+        by_reason: dict[str, np.ndarray] = {}
+        for struck in surface_strikes(log):
+            kind = struck.surface.split(" ")[0]  # "wall" or "ceiling"
+            pull = "suction" if kind == "wall" else "the ceiling effect"
+            name = struck.surface if kind == "wall" else f"the {struck.surface}"
+            in_contact = struck.in_contact.copy()
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int), [0]])))
+            for a, b in zip(edges[::2], edges[1::2]):
+                if in_contact[a:b].any():
+                    in_contact[a:b] = True
+            reason = f"{kind} contact"
+            by_reason[reason] = by_reason.get(reason, np.zeros(log.n_samples, dtype=bool)) | in_contact
+            evidence = []
+            if len(struck.times):
+                at = ", ".join(f"{t:.2f}" for t in struck.times[:MAX_TIMES_LISTED])
+                more = (f" and {len(struck.times) - MAX_TIMES_LISTED} more" if len(struck.times) > MAX_TIMES_LISTED
+                        else "")
+                evidence.append(
+                    f"struck {name} {len(struck.times)} times (t = {at}{more} s): each time pushed away from it more "
+                    f"than {STRIKE_Z:g} times the log's own scatter beyond what the thrust and gravity do, within "
+                    f"{1e3 * STRIKE_WINDOW_S:g} ms, and within {1e3 * SAME_DISTANCE:g} mm of its closest approach")
+            if struck.pressed_s > 0:
+                evidence.append(
+                    f"was pressed against {name} for {struck.pressed_s:.1f} s: pushed away from it more than "
+                    f"{NOT_FALLING:g} g beyond what the thrust and gravity do (over {PRESSED_WINDOW_S:g} s), as no "
+                    "aerodynamic effect there pushes")
             self.notes_.append(
-                f"{log.source}: the vehicle struck wall {struck.wall} {len(struck.times)} times (t = {at}{more} s): "
-                f"each time pushed away from the wall more than {STRIKE_Z:g} times the log's own scatter beyond what "
-                f"the thrust does, within {1e3 * STRIKE_WINDOW_S:g} ms, and within {1e3 * SAME_DISTANCE:g} mm of its "
-                f"closest approach (the nearest rotor centre {1e3 * struck.closest:.1f} mm from the plane). "
-                f"{struck.in_contact.sum() * dt:.1f} s with a rotor centre nearer than "
-                f"{1e3 * struck.touch_distance:.1f} mm are left out as wall contact: the wall pushes the vehicle "
-                "there, and may hold it up, a force that is not aerodynamic; suction nearer the wall than that is "
-                "not determined by this flight (a guard's reach, if the vehicle has guards, is about "
+                f"{log.source}: the vehicle {'; and it '.join(evidence)} (the nearest rotor centre came within "
+                f"{1e3 * struck.closest:.1f} mm of the plane). {in_contact.sum() * dt:.1f} s with a rotor centre "
+                f"nearer than {1e3 * struck.touch_distance:.1f} mm (or held there) are left out as {reason}: the "
+                f"{kind} pushes the vehicle there, a force that is not aerodynamic; {pull} nearer than that is not "
+                "determined by this flight (a guard's reach, if the vehicle has guards, is about "
                 f"{1e3 * (struck.touch_distance - CONTACT_MARGIN):.0f} mm)")
             self._contact_limits.append({
-                "effects": ["wall_suction"],
-                "reason": f"{log.source} struck wall {struck.wall}; the samples nearer it than "
-                          f"{1e3 * struck.touch_distance:.0f} mm (rotor centre) are wall contact, left out, so suction "
+                "effects": [struck.effect],
+                "reason": f"{log.source} touched {name}; the samples nearer it than "
+                          f"{1e3 * struck.touch_distance:.0f} mm (rotor centre) are {reason}, left out, so {pull} "
                           "there is not measured",
-                "manoeuvre": "approach the wall slowly and turn back short of touching it, at several distances"})
-        if not on_wall.any():
-            return on_wall
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int), [0]])))
-        for a, b in zip(edges[::2], edges[1::2]):
-            if on_wall[a:b].any():
-                on_wall[a:b] = True
-        return on_wall
+                "manoeuvre": f"approach the {kind} slowly and turn back short of touching it, at several distances"})
+        return by_reason
 
     @staticmethod
     def _held_at_ceiling(log: FlightLog, samples: np.ndarray, hung_s: float, next_to_s: float) -> str:

@@ -279,6 +279,9 @@ def main(argv: list[str] | None = None) -> int:
                              "light vehicle resists wall suction's pull (N/m) less")
     parser.add_argument("--wall-guard", type=float, default=None,
                         help="the wall stops each rotor's guard of this radius, m (default: the vehicle passes through)")
+    parser.add_argument("--ceiling-guard", type=float, default=None,
+                        help="the ceiling stops each rotor's guard of this radius, m (default: the vehicle passes "
+                             "through)")
     args = parser.parse_args(argv)
     if not 0.25 < args.gain_floor < 5.0:  # at a quarter of the radius the image-rotor gain is infinite
         parser.error(f"--gain-floor must be in (0.25, 5) radii, got {args.gain_floor}")
@@ -286,10 +289,13 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--mass must be in [0.1, 20] kg, got {args.mass}")
     if args.wall_guard is not None and not 0.0 < args.wall_guard < 0.3:
         parser.error(f"--wall-guard must be in (0, 0.3) m, got {args.wall_guard}")
+    if args.ceiling_guard is not None and not 0.0 < args.ceiling_guard < 0.3:
+        parser.error(f"--ceiling-guard must be in (0, 0.3) m, got {args.ceiling_guard}")
     global WEIGHT
     independent_sim.GAIN_FLOOR_RADII = args.gain_floor
     independent_sim.MASS, WEIGHT = args.mass, args.mass * GRAVITY
     independent_sim.WALL_GUARD_RADIUS = args.wall_guard
+    independent_sim.CEILING_GUARD_RADIUS = args.ceiling_guard
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     wanted = None if args.cases is None else {c.strip() for c in args.cases.split(",")}
     records = []

@@ -39,6 +39,8 @@ _CONTACT_FRICTION = 20.0  # N s/m, horizontal, while in contact
 #: with a number, the wall at x = 0 stops the vehicle: each rotor's guard (this radius, m, around the rotor centre)
 #: meets it through the ground's spring, damper and friction; None (the default) lets the vehicle through it
 WALL_GUARD_RADIUS: float | None = None
+#: the same for the ceiling (when a ceiling effect is flown): the guards meet it at CEILING_Z
+CEILING_GUARD_RADIUS: float | None = None
 CEILING_Z = 2.0  # m, the ceiling's height when a ceiling effect is flown
 #: radii (distance plus offset) at which the image-rotor gain levels off; the library's form levels off at 0.5
 GAIN_FLOOR_RADII = 0.6
@@ -132,6 +134,11 @@ def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, d
         if depth > 0:
             normal = max(0.0, _CONTACT_STIFFNESS * depth - _CONTACT_DAMPING * v[0])
             force = force + np.array([normal, -_CONTACT_FRICTION * v[1], -_CONTACT_FRICTION * v[2]])
+    if CEILING_GUARD_RADIUS is not None and "ceiling" in effects:
+        depth = CEILING_GUARD_RADIUS - min(CEILING_Z - (p + R @ rotor)[2] for rotor in ROTORS_BODY)
+        if depth > 0:
+            normal = max(0.0, _CONTACT_STIFFNESS * depth + _CONTACT_DAMPING * v[2])
+            force = force + np.array([-_CONTACT_FRICTION * v[0], -_CONTACT_FRICTION * v[1], -normal])
     return (v, force / MASS - np.array([0, 0, GRAVITY]), 0.5 * _qmul(q, np.array([0.0, *w])), (w_cmd - w) / _RATE_LAG,
             thrust_dot)
 

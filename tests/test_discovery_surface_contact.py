@@ -1,4 +1,5 @@
-"""Strikes on a wall (:mod:`discovery.wall_contact`): told apart from a survey that turns back at one distance."""
+"""Strikes on a wall or the ceiling (:mod:`discovery.surface_contact`): told apart from a survey that turns back at
+one distance."""
 
 from __future__ import annotations
 
@@ -6,7 +7,14 @@ import numpy as np
 import pytest
 
 from discovery.flight_log import FlightLog, NominalVehicle
-from discovery.wall_contact import CONTACT_MARGIN, SAME_DISTANCE, STRIKE_WINDOW_S, outward_jolt, wall_strikes
+from discovery.surface_contact import (
+    CONTACT_MARGIN,
+    SAME_DISTANCE,
+    STRIKE_WINDOW_S,
+    outward_jolt,
+    pressed_against,
+    surface_strikes,
+)
 from wall_env.scene import Scene, Wall
 from wall_env.vehicle import VehicleParams
 
@@ -17,18 +25,22 @@ PERIOD_S = 4.0  # the survey's period toward and away from the wall
 AMPLITUDE = 0.1  # m
 STOP = 0.047  # m: the nearest rotor centre's distance from the wall plane where the wall stops the vehicle
 VELOCITY_NOISE = 0.003  # m/s
+CEILING_Z = 2.0  # m
 
 
 def _survey(depth: float, seed: int = 0, *, velocity_lag_s: float = 0.0, velocity_noise: float = VELOCITY_NOISE,
-            accelerometer: bool = False) -> tuple[FlightLog, np.ndarray]:
+            accelerometer: bool = False, ceiling: bool = False) -> tuple[FlightLog, np.ndarray]:
     """A vehicle flying toward and away from a wall at x = 0 (normal +x): its loop (a PD on position, the thrust
     tilted to give the acceleration it asks) steers a sinusoid whose turning point lies ``depth`` past where the
     wall stops it (negative: short of it). Where the vehicle would pass the stop, the wall stops it dead and holds
     it while the loop pushes on toward the wall; it leaves once the loop pulls it away. The logged velocity is the
     true one filtered over ``velocity_lag_s`` (first order), with noise; with ``accelerometer`` the log has the
-    acceleration too (0.1 m/s^2 noise). Returns the log and the samples the wall held."""
+    acceleration too (0.1 m/s^2 noise). With ``ceiling`` the same up and down under a ceiling at z = CEILING_Z
+    (normal -z), level, the thrust carrying the weight and the loop's acceleration. Returns the log and the samples
+    the surface held."""
     vehicle = NominalVehicle.from_vehicle_params(VehicleParams(mass=MASS))
-    rotor_x = vehicle.rotor_positions_array[:, 0]  # body x; tilted about body y, a rotor sits at x cos(tilt)
+    # x: the distance coordinate (the wall's x; under the ceiling, the rotors' depth below it)
+    rotor_x = vehicle.rotor_positions_array[:, 0] if not ceiling else np.zeros(4)  # tilted, a rotor sits at x cos
     x_stop = STOP - float(rotor_x.min())  # where the vehicle stops when level
     t = np.arange(int(20.0 * RATE_HZ)) / RATE_HZ
     omega, dt = 2 * np.pi / PERIOD_S, 1.0 / RATE_HZ
@@ -51,14 +63,23 @@ def _survey(depth: float, seed: int = 0, *, velocity_lag_s: float = 0.0, velocit
         v_estimate[k] = v_estimate[k - 1] + dt / (velocity_lag_s + dt) * (v[k] - v_estimate[k - 1])
     v_measured = v_estimate + rng.normal(0.0, velocity_noise, len(t))
     a_measured = np.gradient(v, t) + rng.normal(0.0, 0.1, len(t))
-    tilt = np.arctan2(a, G)  # about body y: the thrust's x share gives a, its z share the weight
-    q = np.column_stack([np.cos(tilt / 2), np.zeros_like(t), np.sin(tilt / 2), np.zeros_like(t)])
     n = len(t)
-    log = FlightLog(t=t, p_world=np.column_stack([x, np.zeros(n), np.full(n, 1.0)]),
-                    v_world=np.column_stack([v_measured, np.zeros(n), np.zeros(n)]), q_body_to_world=q,
-                    omega_body=np.zeros((n, 3)), thrust_cmd=MASS * np.hypot(G, a), omega_cmd_body=np.zeros((n, 3)),
-                    vehicle=vehicle, scene=Scene((Wall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)),), 0.0, None), gravity=G,
-                    a_world=np.column_stack([a_measured, np.zeros((n, 2))]) if accelerometer else None)
+    if ceiling:
+        q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+        thrust = MASS * (G - a)  # a is along -z
+        p_world = np.column_stack([np.zeros(n), np.zeros(n), CEILING_Z - x])
+        along = np.array([0.0, 0.0, -1.0])
+        scene = Scene((), 0.0, CEILING_Z)
+    else:
+        tilt = np.arctan2(a, G)  # about body y: the thrust's x share gives a, its z share the weight
+        q = np.column_stack([np.cos(tilt / 2), np.zeros_like(t), np.sin(tilt / 2), np.zeros_like(t)])
+        thrust = MASS * np.hypot(G, a)
+        p_world = np.column_stack([x, np.zeros(n), np.full(n, 1.0)])
+        along = np.array([1.0, 0.0, 0.0])
+        scene = Scene((Wall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)),), 0.0, None)
+    log = FlightLog(t=t, p_world=p_world, v_world=v_measured[:, None] * along, q_body_to_world=q,
+                    omega_body=np.zeros((n, 3)), thrust_cmd=thrust, omega_cmd_body=np.zeros((n, 3)), vehicle=vehicle,
+                    scene=scene, gravity=G, a_world=a_measured[:, None] * along if accelerometer else None)
     return log, held
 
 
@@ -82,8 +103,8 @@ def test_a_vehicle_the_wall_stops_again_and_again_is_in_contact_and_one_that_tur
     turns back just short of the wall every pass comes as near and stops at one distance too, but nothing pushes it
     away harder than its thrust does: it is not taken for contact."""
     log, held = _survey(depth=0.005)
-    (struck,) = wall_strikes(log)
-    assert struck.wall == 0
+    (struck,) = surface_strikes(log)
+    assert (struck.surface, struck.effect) == ("wall 0", "wall_suction")
     entries = log.t[np.flatnonzero(np.diff(held.astype(int)) == 1) + 1]
     assert len(entries) == 5 and len(struck.times) == 5  # one per period of 4 s in 20 s
     assert np.allclose(struck.times, entries, atol=2 * STRIKE_WINDOW_S)
@@ -95,7 +116,7 @@ def test_a_vehicle_the_wall_stops_again_and_again_is_in_contact_and_one_that_tur
     rotors = survey.p_world[:, None, :] + np.einsum("nij,rj->nri", survey.R_body_to_world,
                                                     survey.vehicle.rotor_positions_array)
     assert survey.scene.walls[0].distance(rotors).min() < STOP + 0.002  # as near as the struck vehicle, within 2 mm
-    assert wall_strikes(survey) == []
+    assert surface_strikes(survey) == []
 
 
 def test_with_an_accelerometer_strikes_are_found_behind_a_velocity_estimate_that_smooths_them_away():
@@ -103,9 +124,9 @@ def test_with_an_accelerometer_strikes_are_found_behind_a_velocity_estimate_that
     strike thinner than the log's scatter: none is found from it. The logged acceleration still shows each one."""
     smoothed = {"depth": 0.005, "velocity_lag_s": 0.06, "velocity_noise": 0.01}
     log, held = _survey(**smoothed)
-    assert held.sum() >= 5 and wall_strikes(log) == []
+    assert held.sum() >= 5 and surface_strikes(log) == []
     log, held = _survey(**smoothed, accelerometer=True)
-    (struck,) = wall_strikes(log)
+    (struck,) = surface_strikes(log)
     assert len(struck.times) == 5
     assert struck.in_contact[held].all()
 
@@ -125,4 +146,42 @@ def test_glitches_in_the_velocity_estimate_during_a_hold_by_the_wall_are_not_str
     jolt = outward_jolt(log, np.array([1.0, 0.0, 0.0]))
     window_s = 2 * round(STRIKE_WINDOW_S * RATE_HZ / 2) / RATE_HZ
     assert np.nanmax(jolt) > 10 * np.sqrt(2) * VELOCITY_NOISE / window_s  # as far above the scatter as a strike
-    assert wall_strikes(log) == []
+    assert surface_strikes(log) == []
+
+
+def test_strikes_on_the_ceiling_are_found_against_gravity_and_the_thrust():
+    """The same survey flown up and down under a ceiling: the thrust carries the weight as well, and the jolt away
+    from the ceiling is what is left beyond both."""
+    log, held = _survey(depth=0.005, ceiling=True)
+    (struck,) = surface_strikes(log)
+    assert (struck.surface, struck.effect) == ("ceiling", "ceiling_effect")
+    assert len(struck.times) == 5 and struck.pressed_s == 0.0
+    assert struck.closest == pytest.approx(STOP, abs=1e-4)
+    assert struck.in_contact[held].all()
+    survey, held = _survey(depth=-0.001, ceiling=True)
+    assert not held.any() and surface_strikes(survey) == []
+
+
+def test_a_vehicle_driven_into_the_ceiling_is_pressed_against_it_and_one_hovering_under_it_is_not():
+    """3 cm under the ceiling and still, the thrust at the weight for 2 s, then at 1.5 times it for 2 s (the loop
+    winding up against a ceiling it cannot pass), then at the weight again. Only the middle 2 s is the vehicle pushed
+    down harder than gravity less the thrust, which only the ceiling does (less the half-second average's edges)."""
+    t = np.arange(int(6.0 * RATE_HZ)) / RATE_HZ
+    n = len(t)
+    thrust = np.where((t >= 2.0) & (t < 4.0), 1.5, 1.0) * MASS * G
+    vehicle = NominalVehicle.from_vehicle_params(VehicleParams(mass=MASS))
+    rng = np.random.default_rng(3)
+    log = FlightLog(t=t, p_world=np.column_stack([np.zeros(n), np.zeros(n), np.full(n, CEILING_Z - 0.03)]),
+                    v_world=rng.normal(0.0, VELOCITY_NOISE, (n, 3)), q_body_to_world=np.tile([1.0, 0, 0, 0], (n, 1)),
+                    omega_body=np.zeros((n, 3)), thrust_cmd=thrust, omega_cmd_body=np.zeros((n, 3)), vehicle=vehicle,
+                    scene=Scene((), 0.0, CEILING_Z), gravity=G)
+    pressed = pressed_against(log, np.array([0.0, 0.0, -1.0]))
+    # the 0.5 s average of a 0.5 g step crosses 0.25 g half way in: from 2.0 s to 4.0 s, within a sample or two
+    assert 1.95 <= t[pressed].min() <= 2.05 and 3.93 <= t[pressed].max() <= 4.02
+    assert pressed.sum() / RATE_HZ == pytest.approx(2.0, abs=0.08)
+    (touched,) = surface_strikes(log)
+    assert touched.surface == "ceiling" and len(touched.times) == 0
+    assert touched.pressed_s == pytest.approx(2.0, abs=0.08)
+    assert touched.touch_distance == pytest.approx(0.03 + CONTACT_MARGIN, abs=1e-6)
+    hover = FlightLog(**{**log.__dict__, "thrust_cmd": np.full(n, MASS * G)})
+    assert not pressed_against(hover, np.array([0.0, 0.0, -1.0])).any() and surface_strikes(hover) == []

@@ -1,0 +1,185 @@
+"""Strikes on a wall or the ceiling: a rotor's guard (or the frame) touches it, and it pushes the vehicle.
+
+Near a wall the rotors' airflow pulls the vehicle *toward* it, and under a ceiling *up* to it;
+no aerodynamic effect there pushes it away harder than the thrust and gravity do (drag at the
+slow approach speeds near a surface is small). A surface that stops the vehicle does: a guard
+gives a few millimetres and stops it within a few tens of milliseconds, while the vehicle's
+own loop brakes over hundreds (it must first tilt or cut the thrust). So a strike shows as a
+short acceleration away from the surface well beyond the thrust's and gravity's, at the
+vehicle's closest approach; and a vehicle that struck a surface several times was stopped
+each time at about the same distance: the guard's reach.
+
+In contact (the impact, then pinned against or sliding along the surface) the surface carries
+part of the force, and on a wall friction may hold the vehicle up. In the force residual a
+pinned vehicle looks like a pull too weak (it does not accelerate, however hard suction or the
+ceiling effect pulls), so a fit that keeps these samples finds a wrong k_s or ceiling radius,
+or nothing and an unexplained force. :func:`surface_strikes` finds the strikes and the samples
+at or nearer than the distance they happened at; the workflow leaves those out with the reason
+"wall contact" or "ceiling contact". The ground is not asked: a touchdown is a strike on it by
+design, and :mod:`discovery.coverage` leaves the ground's rests and touchdowns out.
+
+Without an accelerometer column the jolt is read from the logged velocity; a velocity estimate
+smoothed over more than the jolt's window (a filtered motion-capture derivative, say 50 ms) spreads
+a strike too thin to find, and the contact is then fitted as a pull too weak. Log the
+acceleration (``ax, ay, az``) when the vehicle may touch a surface.
+
+A vehicle whose loop drives it on into a surface it cannot pass (a ceiling above its reference,
+the integrator winding the thrust up to twice the weight) may strike it once and then stay
+pressed there. :func:`pressed_against` finds that the way a rest on the ground is found: over
+half a second the vehicle is pushed away from the surface by more than g/4 beyond what the
+thrust and gravity do, near it (within :data:`discovery.coverage.NEAR_SURFACE`); half a
+second of that, in all, marks the surface as touched.
+
+The strike test is one-sided and needs repetition, so that steady flight close to a surface (a hold
+at a few centimetres, a survey that turns back at the same distance each pass) is not taken
+for contact: at least :data:`MIN_STRIKES` separate jolts away from the surface of
+:data:`STRIKE_Z` robust standard deviations of the log's own scatter, each within
+:data:`SAME_DISTANCE` of the closest approach, and each after the vehicle came at the surface
+with at least :data:`APPROACH_SHARE` of the speed the jolt took away (a glitch in the velocity
+estimate during a hold jolts a vehicle that was not moving).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from discovery.coverage import NEAR_SURFACE, NOT_FALLING
+from discovery.differentiation import moving_average
+from discovery.flight_log import FlightLog
+
+__all__ = ["Strikes", "surface_strikes", "outward_jolt", "pressed_against", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES",
+           "SAME_DISTANCE", "CONTACT_MARGIN"]
+
+STRIKE_WINDOW_S = 0.03  # s: a guard stops the vehicle in about this long; the loop's braking takes hundreds of ms
+STRIKE_Z = 4.0  # robust standard deviations of the outward acceleration beyond the thrust's
+SAME_DISTANCE = 0.005  # m: strikes within this of the closest approach to a surface are stopped at one distance
+MIN_STRIKES = 2  # separate strikes (at least STRIKE_SEPARATION_S apart) before a surface is taken to be struck
+STRIKE_SEPARATION_S = 0.2  # s
+CONTACT_MARGIN = 0.002  # m past the farthest strike's distance that still counts as touching (the guard's give)
+APPROACH_SHARE = 0.5  # of the speed a jolt takes away, the least the vehicle came at the surface with before it
+PRESSED_WINDOW_S = 0.5  # s: a push away from the surface averaged over this long, like a rest on the ground
+PRESSED_S = 0.5  # s of being pressed against a surface, in all, before it is taken to be touched
+SCATTER_FLOOR = 0.05  # m/s^2: the least scatter a jolt is measured against (a noise-free simulated log has none)
+
+
+@dataclass(frozen=True)
+class Strikes:
+    """The strikes on one surface of a log's scene and the samples in contact with it."""
+
+    surface: str  # "wall 0", "wall 1", ... or "ceiling"
+    effect: str  # the effect whose pull acts there: "wall_suction" or "ceiling_effect"
+    times: np.ndarray  # (strikes,) s: the strongest jolt of each strike (empty when fewer than MIN_STRIKES)
+    pressed_s: float  # s the vehicle was pressed against the surface (pressed_against) at its closest approach
+    closest: float  # m: the nearest rotor centre's closest approach to the surface's plane
+    touch_distance: float  # m: the farthest strike's distance plus CONTACT_MARGIN; nearer than this is contact
+    in_contact: np.ndarray  # (n,) bool: nearer the surface than touch_distance, or within STRIKE_WINDOW_S of it
+
+
+def outward_jolt(log: FlightLog, normal: np.ndarray) -> np.ndarray:
+    """The acceleration along ``normal`` beyond the thrust's and gravity's (m/s^2), each over about
+    :data:`STRIKE_WINDOW_S`: the logged acceleration averaged over the window where the log has one (an accelerometer
+    sees an impact whatever filter the velocity estimate went through), else the change of the logged velocity over
+    it; less the thrust's and gravity's acceleration averaged over the window. NaN where the window does not fit
+    (the log's ends)."""
+    n = log.n_samples
+    dt = float(np.median(np.diff(log.t)))
+    half = max(1, int(round(STRIKE_WINDOW_S / dt / 2)))
+    jolt = np.full(n, np.nan)
+    if n <= 2 * half:
+        return jolt
+    free_n = log.total_thrust * (log.R_body_to_world[:, :, 2] @ normal) / log.vehicle.mass - log.gravity * normal[2]
+    inner = slice(half, n - half)
+    if log.a_world is not None:
+        measured = moving_average(log.a_world @ normal, 2 * half + 1)[inner]
+    else:
+        v_n = log.v_world @ normal
+        measured = (v_n[2 * half:] - v_n[:n - 2 * half]) / (log.t[2 * half:] - log.t[:n - 2 * half])
+    jolt[inner] = measured - moving_average(free_n, 2 * half + 1)[inner]
+    return jolt
+
+
+def pressed_against(log: FlightLog, normal: np.ndarray) -> np.ndarray:
+    """Samples at which the vehicle is pushed away from the surface whose normal is ``normal`` by more than
+    :data:`discovery.coverage.NOT_FALLING` g beyond what the thrust and gravity do, both averaged over
+    :data:`PRESSED_WINDOW_S`: a vehicle whose loop drives it on into a ceiling with twice its weight in thrust, and
+    that does not rise. No aerodynamic effect near a wall or a ceiling pushes that way (they pull toward it)."""
+    dt = float(np.median(np.diff(log.t)))
+    window = max(1, int(round(PRESSED_WINDOW_S / dt)))
+    measured = (moving_average(log.a_world @ normal, window) if log.a_world is not None
+                else np.gradient(moving_average(log.v_world @ normal, window), log.t))
+    free_n = log.total_thrust * (log.R_body_to_world[:, :, 2] @ normal) / log.vehicle.mass - log.gravity * normal[2]
+    return measured > moving_average(free_n, window) + NOT_FALLING * log.gravity
+
+
+def _was_approaching(log: FlightLog, normal: np.ndarray, i: int, jolt: float) -> bool:
+    """Whether the vehicle came at the surface before the jolt at sample ``i``: over the window before the jolt's
+    own, its mean speed toward the surface is at least :data:`APPROACH_SHARE` of the speed the jolt took away
+    (``jolt`` times its window). A glitch in the velocity estimate, or a hold's noise, jolts a vehicle that was not
+    moving."""
+    dt = float(np.median(np.diff(log.t)))
+    half = max(1, int(round(STRIKE_WINDOW_S / dt / 2)))
+    before = log.v_world[max(0, i - 3 * half):max(1, i - half), :] @ normal
+    return bool(-before.mean() >= APPROACH_SHARE * jolt * 2 * half * dt)
+
+
+def _planes(log: FlightLog, rotors_world: np.ndarray) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    """``(surface, effect, normal, distance)`` for each wall and the ceiling: the unit normal into free space and
+    the nearest rotor centre's distance from the plane at every sample. A wall whose normal points into it (most of
+    the flight behind it) is turned round, as the scene check turns it."""
+    planes = []
+    for k, wall in enumerate(log.scene.walls):
+        normal, distance = np.asarray(wall.normal), wall.distance(rotors_world).min(axis=1)
+        if np.mean(distance < 0) > 0.5:
+            normal, distance = -normal, -wall.distance(rotors_world).max(axis=1)
+        planes.append((f"wall {k}", "wall_suction", normal, distance))
+    if log.scene.ceiling_z is not None:
+        planes.append(("ceiling", "ceiling_effect", np.array([0.0, 0.0, -1.0]),
+                       log.scene.ceiling_z - rotors_world[:, :, 2].max(axis=1)))
+    return planes
+
+
+def surface_strikes(log: FlightLog) -> list[Strikes]:
+    """The walls and the ceiling of ``log.scene`` the vehicle struck (see the module text), each with its contact
+    samples."""
+    if log.n_samples < 3:
+        return []
+    rotors_world = log.p_world[:, None, :] + np.einsum("nij,rj->nri", log.R_body_to_world,
+                                                       log.vehicle.rotor_positions_array)
+    dt = float(np.median(np.diff(log.t)))
+    out = []
+    for surface, effect, normal, distance in _planes(log, rotors_world):
+        closest = float(distance.min())
+        if closest >= NEAR_SURFACE:
+            continue
+        jolt = outward_jolt(log, normal)
+        finite = np.isfinite(jolt)
+        if finite.sum() < 3:
+            continue
+        centre = float(np.median(jolt[finite]))
+        scatter = max(SCATTER_FLOOR, 1.4826 * float(np.median(np.abs(jolt[finite] - centre))))
+        hits = np.flatnonzero(finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter)
+                              & (distance < closest + SAME_DISTANCE))
+        hits = hits[[_was_approaching(log, normal, int(i), float(jolt[i])) for i in hits]]
+        strikes: list[list[int]] = []
+        for i in hits:
+            if strikes and log.t[i] - log.t[strikes[-1][-1]] <= STRIKE_SEPARATION_S:
+                strikes[-1].append(int(i))
+            else:
+                strikes.append([int(i)])
+        pressed = pressed_against(log, normal) & (distance < NEAR_SURFACE)
+        struck = len(strikes) >= MIN_STRIKES
+        if not struck and pressed.sum() * dt < PRESSED_S:
+            continue
+        touching = np.concatenate([hits if struck else np.zeros(0, dtype=int), np.flatnonzero(pressed)])
+        touch = float(distance[touching].max()) + CONTACT_MARGIN
+        peaks = np.array([log.t[max(s, key=lambda i: jolt[i])] for s in strikes]) if struck else np.zeros(0)
+        # widened by the jolt's window on each side: a stiff guard bounces the vehicle off in a sample or two, too
+        # short a gap to cut the log there, and the residual's smoothing would carry the impulse into the samples
+        # kept on either side
+        pad = max(1, int(round(STRIKE_WINDOW_S / dt)))
+        in_contact = np.convolve((distance < touch).astype(float), np.ones(2 * pad + 1), mode="same") > 0
+        out.append(Strikes(surface=surface, effect=effect, times=peaks, pressed_s=float(pressed.sum() * dt),
+                           closest=closest, touch_distance=touch, in_contact=in_contact))
+    return out
