@@ -30,13 +30,19 @@ half a second the vehicle is pushed away from the surface by more than g/4 beyon
 thrust and gravity do, near it (within :data:`discovery.coverage.NEAR_SURFACE`); half a
 second of that, in all, marks the surface as touched.
 
+The jolt is measured as a jump (:func:`jolt_jump`): from its level over the window just before.
+Along the approach the surface's own pull keeps it well below zero (suction -1.5 m/s^2 at
+2.5 cm), and a strike measured from zero was lost in the scatter that pull adds.
+
 The strike test is one-sided and needs repetition, so that steady flight close to a surface (a hold
 at a few centimetres, a survey that turns back at the same distance each pass) is not taken
 for contact: at least :data:`MIN_STRIKES` separate jolts away from the surface of
 :data:`STRIKE_Z` robust standard deviations of the log's own scatter, each within
 :data:`SAME_DISTANCE` of the closest approach, and each after the vehicle came at the surface
 with at least :data:`APPROACH_SHARE` of the speed the jolt took away (a glitch in the velocity
-estimate during a hold jolts a vehicle that was not moving).
+estimate during a hold jolts a vehicle that was not moving). One strike suffices when the
+vehicle then stays within the contact distance for :data:`PINNED_S`: the surface's pull holds
+it there after the first strike (a 2.5 cm guard on a light vehicle), so it never strikes again.
 """
 
 from __future__ import annotations
@@ -49,7 +55,7 @@ from discovery.coverage import NEAR_SURFACE, NOT_FALLING
 from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 
-__all__ = ["Strikes", "surface_strikes", "outward_jolt", "pressed_against", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES",
+__all__ = ["Strikes", "surface_strikes", "outward_jolt", "jolt_jump", "pressed_against", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES",
            "SAME_DISTANCE", "CONTACT_MARGIN"]
 
 STRIKE_WINDOW_S = 0.03  # s: a guard stops the vehicle in about this long; the loop's braking takes hundreds of ms
@@ -59,6 +65,8 @@ MIN_STRIKES = 2  # separate strikes (at least STRIKE_SEPARATION_S apart) before 
 STRIKE_SEPARATION_S = 0.2  # s
 CONTACT_MARGIN = 0.002  # m past the farthest strike's distance that still counts as touching (the guard's give)
 APPROACH_SHARE = 0.5  # of the speed a jolt takes away, the least the vehicle came at the surface with before it
+PINNED_S = 1.0  # s: one strike suffices when the vehicle then stays this long within the contact distance
+PINNED_SHARE = 0.9  # of the samples over PINNED_S
 PRESSED_WINDOW_S = 0.5  # s: a push away from the surface averaged over this long, like a rest on the ground
 PRESSED_S = 0.5  # s of being pressed against a surface, in all, before it is taken to be touched
 SCATTER_FLOOR = 0.05  # m/s^2: the least scatter a jolt is measured against (a noise-free simulated log has none)
@@ -113,6 +121,27 @@ def pressed_against(log: FlightLog, normal: np.ndarray) -> np.ndarray:
     return measured > moving_average(free_n, window) + NOT_FALLING * log.gravity
 
 
+def jolt_jump(jolt: np.ndarray, half: int) -> np.ndarray:
+    """``jolt`` less its mean over the ``2 half + 1`` samples that end where its own window (``half`` samples each
+    side) begins: how suddenly the push away from the surface changed. Near a wall, suction's pull keeps the jolt
+    well below zero all along the approach (-1.5 m/s^2 at 2.5 cm), and a strike is the jump from there; measured from
+    zero it was lost in the scatter that suction's own structure adds. NaN where either window has no value."""
+    n = len(jolt)
+    width = 2 * half + 1
+    jump = np.full(n, np.nan)
+    start = 2 * width - 1  # the first sample whose earlier window fits: it ends at i - half - 1
+    if n <= start:
+        return jump
+    sums = np.concatenate([[0.0], np.cumsum(np.nan_to_num(jolt))])
+    counts = np.concatenate([[0], np.cumsum(np.isfinite(jolt))])
+    i = np.arange(start, n)
+    end = i - half  # exclusive end of the earlier window
+    mean = (sums[end] - sums[end - width]) / width
+    full = (counts[end] - counts[end - width]) == width
+    jump[i] = np.where(full, jolt[i] - mean, np.nan)
+    return jump
+
+
 def _was_approaching(log: FlightLog, normal: np.ndarray, i: int, jolt: float) -> bool:
     """Whether the vehicle came at the surface before the jolt at sample ``i``: over the window before the jolt's
     own, its mean speed toward the surface is at least :data:`APPROACH_SHARE` of the speed the jolt took away
@@ -122,6 +151,13 @@ def _was_approaching(log: FlightLog, normal: np.ndarray, i: int, jolt: float) ->
     half = max(1, int(round(STRIKE_WINDOW_S / dt / 2)))
     before = log.v_world[max(0, i - 3 * half):max(1, i - half), :] @ normal
     return bool(-before.mean() >= APPROACH_SHARE * jolt * 2 * half * dt)
+
+
+def _stays_pinned(t: np.ndarray, distance: np.ndarray, i: int, touch: float) -> bool:
+    """Whether, for :data:`PINNED_S` after sample ``i``, nearly all samples (:data:`PINNED_SHARE`) stay nearer the
+    surface than ``touch``: a strike the surface's pull then holds the vehicle against."""
+    after = (t > t[i]) & (t <= t[i] + PINNED_S)
+    return bool(t[-1] - t[i] >= PINNED_S and np.mean(distance[after] < touch) >= PINNED_SHARE)
 
 
 def _planes(log: FlightLog, rotors_world: np.ndarray) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
@@ -148,19 +184,21 @@ def surface_strikes(log: FlightLog) -> list[Strikes]:
     rotors_world = log.p_world[:, None, :] + np.einsum("nij,rj->nri", log.R_body_to_world,
                                                        log.vehicle.rotor_positions_array)
     dt = float(np.median(np.diff(log.t)))
+    half = max(1, int(round(STRIKE_WINDOW_S / dt / 2)))
     out = []
     for surface, effect, normal, distance in _planes(log, rotors_world):
         closest = float(distance.min())
         if closest >= NEAR_SURFACE:
             continue
-        jolt = outward_jolt(log, normal)
+        jolt = jolt_jump(outward_jolt(log, normal), half)
         finite = np.isfinite(jolt)
         if finite.sum() < 3:
             continue
         centre = float(np.median(jolt[finite]))
         scatter = max(SCATTER_FLOOR, 1.4826 * float(np.median(np.abs(jolt[finite] - centre))))
+        # a rotor centre past the plane is a scene error (reported as such), not a guard touching the surface
         hits = np.flatnonzero(finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter)
-                              & (distance < closest + SAME_DISTANCE))
+                              & (distance < closest + SAME_DISTANCE) & (distance > 0))
         hits = hits[[_was_approaching(log, normal, int(i), float(jolt[i])) for i in hits]]
         strikes: list[list[int]] = []
         for i in hits:
@@ -168,8 +206,9 @@ def surface_strikes(log: FlightLog) -> list[Strikes]:
                 strikes[-1].append(int(i))
             else:
                 strikes.append([int(i)])
-        pressed = pressed_against(log, normal) & (distance < NEAR_SURFACE)
-        struck = len(strikes) >= MIN_STRIKES
+        pressed = pressed_against(log, normal) & (distance < NEAR_SURFACE) & (distance > 0)
+        struck = len(strikes) >= MIN_STRIKES or any(
+            _stays_pinned(log.t, distance, s[-1], float(distance[hits].max()) + CONTACT_MARGIN) for s in strikes)
         if not struck and pressed.sum() * dt < PRESSED_S:
             continue
         touching = np.concatenate([hits if struck else np.zeros(0, dtype=int), np.flatnonzero(pressed)])

@@ -11,6 +11,7 @@ from discovery.surface_contact import (
     CONTACT_MARGIN,
     SAME_DISTANCE,
     STRIKE_WINDOW_S,
+    jolt_jump,
     outward_jolt,
     pressed_against,
     surface_strikes,
@@ -185,3 +186,22 @@ def test_a_vehicle_driven_into_the_ceiling_is_pressed_against_it_and_one_hoverin
     assert touched.touch_distance == pytest.approx(0.03 + CONTACT_MARGIN, abs=1e-6)
     hover = FlightLog(**{**log.__dict__, "thrust_cmd": np.full(n, MASS * G)})
     assert not pressed_against(hover, np.array([0.0, 0.0, -1.0])).any() and surface_strikes(hover) == []
+
+
+def test_the_jump_measures_a_strike_from_the_pull_the_vehicle_was_under_just_before():
+    """Near the wall suction keeps the jolt at -1.5 m/s^2 along the approach; a strike lifts it to +2.2 m/s^2 for a
+    window. Measured from zero that is 2.2; measured from where it was just before, the 3.7 the wall gave. Before
+    the earlier window fits (the log's start) there is no jump."""
+    half = 2
+    t = np.arange(200) / RATE_HZ
+    jolt = -1.5 + 0.2 * np.sin(2 * np.pi * 0.5 * t)  # suction's pull, changing slowly along the approach
+    strike = 120
+    jolt[strike - half:strike + half + 1] = 2.2
+    jump = jolt_jump(jolt, half)
+    width = 2 * half + 1
+    assert np.isnan(jump[:2 * width - 1]).all() and np.isfinite(jump[2 * width - 1:]).all()
+    before = jolt[strike - half - width:strike - half].mean()
+    assert jump[strike] == pytest.approx(2.2 - before, abs=1e-12)
+    assert 3.6 < jump[strike] < 3.8
+    quiet = np.isfinite(jump) & (np.abs(np.arange(200) - strike) > 3 * width)
+    assert np.abs(jump[quiet]).max() < 0.04  # the pull changes by at most 0.63 m/s^3 x 50 ms = 0.03 m/s^2
