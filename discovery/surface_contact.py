@@ -59,7 +59,7 @@ __all__ = ["Strikes", "surface_strikes", "outward_jolt", "jolt_jump", "pressed_a
            "SAME_DISTANCE", "CONTACT_MARGIN"]
 
 STRIKE_WINDOW_S = 0.03  # s: a guard stops the vehicle in about this long; the loop's braking takes hundreds of ms
-STRIKE_Z = 4.0  # robust standard deviations of the outward acceleration beyond the thrust's
+STRIKE_Z = 4.0  # robust standard deviations of the log's jumps (jolt_jump) a strike's jump exceeds
 SAME_DISTANCE = 0.005  # m: strikes within this of the closest approach to a surface are stopped at one distance
 MIN_STRIKES = 2  # separate strikes (at least STRIKE_SEPARATION_S apart) before a surface is taken to be struck
 STRIKE_SEPARATION_S = 0.2  # s
@@ -78,8 +78,8 @@ class Strikes:
 
     surface: str  # "wall 0", "wall 1", ... or "ceiling"
     effect: str  # the effect whose pull acts there: "wall_suction" or "ceiling_effect"
-    times: np.ndarray  # (strikes,) s: the strongest jolt of each strike (empty when fewer than MIN_STRIKES)
-    pressed_s: float  # s the vehicle was pressed against the surface (pressed_against) at its closest approach
+    times: np.ndarray  # (strikes,) s: the strongest jump of each strike (empty when only pressed against it)
+    pressed_s: float  # s the vehicle was pressed against the surface (pressed_against), within NEAR_SURFACE
     closest: float  # m: the nearest rotor centre's closest approach to the surface's plane
     touch_distance: float  # m: the farthest strike's distance plus CONTACT_MARGIN; nearer than this is contact
     in_contact: np.ndarray  # (n,) bool: nearer the surface than touch_distance, or within STRIKE_WINDOW_S of it
