@@ -56,7 +56,7 @@ def resting_on_ground(log: FlightLog) -> np.ndarray:
     # with the thrust carrying a share s < 1/2 of the weight a free vehicle falls at (1 - s) g > g / 2; the
     # thrust's own acceleration is smoothed like the measured one, so that a short, deliberate drop of the
     # thrust in the air (a quick descent) does not look held up under the smoothing
-    a_z_thrust = moving_average(vertical / log.vehicle.mass - log.gravity, window)
+    a_z_thrust = moving_average(log.free_acceleration(np.array([0.0, 0.0, 1.0])), window)
     not_falling = a_z > a_z_thrust + NOT_FALLING * log.gravity
     return (vertical < REST_THRUST_SHARE * weight) & not_falling
 

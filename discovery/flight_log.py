@@ -257,6 +257,12 @@ class FlightLog:
         """``(n,)`` N: the rotors' logged thrusts summed where the log has them, else the commanded thrust."""
         return self.rotor_thrusts.sum(axis=1) if self.rotor_thrusts is not None else self.thrust_cmd
 
+    def free_acceleration(self, direction: np.ndarray) -> np.ndarray:
+        """``(n,)`` m/s^2: the acceleration the thrust and gravity alone give along the unit vector ``direction``
+        (world); what the log's vehicle would do with nothing else acting on it."""
+        return (self.total_thrust * (self.R_body_to_world[:, :, 2] @ direction) / self.vehicle.mass
+                - self.gravity * direction[2])
+
     def segments(self) -> list[slice]:
         """Contiguous stretches without gaps longer than :data:`GAP_FACTOR` median periods, counted in whole periods:
         a step of exactly three (two samples dropped) came out a rounding error longer and split a 250 Hz log with

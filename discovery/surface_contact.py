@@ -92,12 +92,11 @@ def outward_jolt(log: FlightLog, normal: np.ndarray) -> np.ndarray:
     it; less the thrust's and gravity's acceleration averaged over the window. NaN where the window does not fit
     (the log's ends)."""
     n = log.n_samples
-    dt = float(np.median(np.diff(log.t)))
-    half = max(1, int(round(STRIKE_WINDOW_S / dt / 2)))
+    half = _half_window(log)
     jolt = np.full(n, np.nan)
     if n <= 2 * half:
         return jolt
-    free_n = log.total_thrust * (log.R_body_to_world[:, :, 2] @ normal) / log.vehicle.mass - log.gravity * normal[2]
+    free_n = log.free_acceleration(normal)
     inner = slice(half, n - half)
     if log.a_world is not None:
         measured = moving_average(log.a_world @ normal, 2 * half + 1)[inner]
@@ -117,8 +116,7 @@ def pressed_against(log: FlightLog, normal: np.ndarray) -> np.ndarray:
     window = max(1, int(round(PRESSED_WINDOW_S / dt)))
     measured = (moving_average(log.a_world @ normal, window) if log.a_world is not None
                 else np.gradient(moving_average(log.v_world @ normal, window), log.t))
-    free_n = log.total_thrust * (log.R_body_to_world[:, :, 2] @ normal) / log.vehicle.mass - log.gravity * normal[2]
-    return measured > moving_average(free_n, window) + NOT_FALLING * log.gravity
+    return measured > moving_average(log.free_acceleration(normal), window) + NOT_FALLING * log.gravity
 
 
 def jolt_jump(jolt: np.ndarray, half: int) -> np.ndarray:
@@ -142,13 +140,17 @@ def jolt_jump(jolt: np.ndarray, half: int) -> np.ndarray:
     return jump
 
 
-def _was_approaching(log: FlightLog, normal: np.ndarray, i: int, jolt: float) -> bool:
+def _half_window(log: FlightLog) -> int:
+    """Samples on each side of a jolt's centre: half of :data:`STRIKE_WINDOW_S` at the log's median rate, at least 1."""
+    return max(1, int(round(STRIKE_WINDOW_S / float(np.median(np.diff(log.t))) / 2)))
+
+
+def _was_approaching(log: FlightLog, normal: np.ndarray, i: int, jolt: float, half: int) -> bool:
     """Whether the vehicle came at the surface before the jolt at sample ``i``: over the window before the jolt's
     own, its mean speed toward the surface is at least :data:`APPROACH_SHARE` of the speed the jolt took away
     (``jolt`` times its window). A glitch in the velocity estimate, or a hold's noise, jolts a vehicle that was not
     moving."""
     dt = float(np.median(np.diff(log.t)))
-    half = max(1, int(round(STRIKE_WINDOW_S / dt / 2)))
     before = log.v_world[max(0, i - 3 * half):max(1, i - half), :] @ normal
     return bool(-before.mean() >= APPROACH_SHARE * jolt * 2 * half * dt)
 
@@ -184,7 +186,7 @@ def surface_strikes(log: FlightLog) -> list[Strikes]:
     rotors_world = log.p_world[:, None, :] + np.einsum("nij,rj->nri", log.R_body_to_world,
                                                        log.vehicle.rotor_positions_array)
     dt = float(np.median(np.diff(log.t)))
-    half = max(1, int(round(STRIKE_WINDOW_S / dt / 2)))
+    half = _half_window(log)
     out = []
     for surface, effect, normal, distance in _planes(log, rotors_world):
         closest = float(distance.min())
@@ -199,7 +201,7 @@ def surface_strikes(log: FlightLog) -> list[Strikes]:
         # a rotor centre past the plane is a scene error (reported as such), not a guard touching the surface
         hits = np.flatnonzero(finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter)
                               & (distance < closest + SAME_DISTANCE) & (distance > 0))
-        hits = hits[[_was_approaching(log, normal, int(i), float(jolt[i])) for i in hits]]
+        hits = hits[[_was_approaching(log, normal, int(i), float(jolt[i]), half) for i in hits]]
         strikes: list[list[int]] = []
         for i in hits:
             if strikes and log.t[i] - log.t[strikes[-1][-1]] <= STRIKE_SEPARATION_S:
