@@ -63,7 +63,7 @@ def regressors(data: FlightData) -> list[Regressor]:
     for s, seg in enumerate(data.segments):
         p = seg.states.p_world
         R = seg.states.R_body_to_world
-        rotor_world = p[:, None, :] + np.einsum("nij,rj->nri", R, rotors)  # (n, 4, 3)
+        rotor_world = rotor_centres_world(p, R, rotors)
         for k, wall in enumerate(seg.scene.walls):
             d = (rotor_world - np.asarray(wall.point)) @ np.asarray(wall.normal)  # (n, 4)
             add(f"nearest rotor distance to wall {k}", "m", s, d.min(axis=1))
@@ -86,6 +86,11 @@ def regressors(data: FlightData) -> list[Regressor]:
         add("thrust", "N", s, seg.thrust)
         add("time", "s", s, seg.t)
     return [Regressor(name, unit, np.concatenate(parts)) for (name, unit), parts in per_segment.items()]
+
+
+def rotor_centres_world(p_world: np.ndarray, R_body_to_world: np.ndarray, rotors_body: np.ndarray) -> np.ndarray:
+    """``(n, rotors, 3)`` m: each rotor centre in the world at every sample."""
+    return p_world[:, None, :] + np.einsum("nij,rj->nri", R_body_to_world, rotors_body)
 
 
 def surface_clearances(rotor_z: np.ndarray, scene: Any) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -137,7 +142,7 @@ def _body_distances(scene: Any, rotors: np.ndarray, p: np.ndarray, R: np.ndarray
 
     slots = _surface_query(scene, tuple(map(tuple, rotors))).rotor_surfaces_at(p, R)
     slots = slots.reshape(len(p), 4, SURFACE_SLOTS, SURFACE_SIZE)[:, :, 0]  # slot 0: the nearest
-    rotor_world = p[:, None, :] + np.einsum("nij,rj->nri", R, rotors)
+    rotor_world = rotor_centres_world(p, R, rotors)
     d = np.einsum("nrj,nrj->nr", slots[:, :, 3:6], rotor_world - slots[:, :, 0:3])
     return np.where(slots[:, :, 6] > 0, d, SURFACE_REACH)
 

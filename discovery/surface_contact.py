@@ -54,6 +54,7 @@ import numpy as np
 from discovery.coverage import NEAR_SURFACE, NOT_FALLING
 from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
+from discovery.regressors import rotor_centres_world, surface_clearances
 
 __all__ = ["Strikes", "surface_strikes", "outward_jolt", "jolt_jump", "pressed_against", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES",
            "SAME_DISTANCE", "CONTACT_MARGIN"]
@@ -172,9 +173,9 @@ def _planes(log: FlightLog, rotors_world: np.ndarray) -> list[tuple[str, str, np
         if np.mean(distance < 0) > 0.5:
             normal, distance = -normal, -wall.distance(rotors_world).max(axis=1)
         planes.append((f"wall {k}", "wall_suction", normal, distance))
-    if log.scene.ceiling_z is not None:
-        planes.append(("ceiling", "ceiling_effect", np.array([0.0, 0.0, -1.0]),
-                       log.scene.ceiling_z - rotors_world[:, :, 2].max(axis=1)))
+    below_ceiling = surface_clearances(rotors_world[:, :, 2], log.scene)[1]
+    if below_ceiling is not None:
+        planes.append(("ceiling", "ceiling_effect", np.array([0.0, 0.0, -1.0]), below_ceiling))
     return planes
 
 
@@ -183,8 +184,7 @@ def surface_strikes(log: FlightLog) -> list[Strikes]:
     samples."""
     if log.n_samples < 3:
         return []
-    rotors_world = log.p_world[:, None, :] + np.einsum("nij,rj->nri", log.R_body_to_world,
-                                                       log.vehicle.rotor_positions_array)
+    rotors_world = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)
     dt = float(np.median(np.diff(log.t)))
     half = _half_window(log)
     out = []

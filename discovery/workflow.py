@@ -793,12 +793,12 @@ class Discovery:
         with a note and a limit per surface. A stretch ``held`` up (a rest, or the moments next to it) that reaches
         into the contact is the surface holding the vehicle (friction on a wall), and counts as its contact too."""
         by_reason: dict[str, np.ndarray] = {}
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int), [0]])))  # the held stretches' ends
         for struck in surface_strikes(log):
             kind = struck.surface.split(" ")[0]  # "wall" or "ceiling"
             pull = "suction" if kind == "wall" else "the ceiling effect"
             name = struck.surface if kind == "wall" else f"the {struck.surface}"
             in_contact = struck.in_contact.copy()
-            edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int), [0]])))
             for a, b in zip(edges[::2], edges[1::2]):
                 if in_contact[a:b].any():
                     in_contact[a:b] = True
