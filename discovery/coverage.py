@@ -34,7 +34,7 @@ import numpy as np
 
 from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
-from discovery.regressors import surface_clearances
+from discovery.regressors import rotor_centres_world, surface_clearances
 
 __all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "resting_on_ground", "ground_contact", "at_ceiling", "rotor_clearances",
            "flight_limits", "nearest_wall", "thrust_variation", "scene_problems"]
@@ -123,8 +123,7 @@ def at_ceiling(log: FlightLog) -> np.ndarray:
 def rotor_clearances(log: FlightLog) -> tuple[np.ndarray, np.ndarray]:
     """``(below_ceiling, above_ground)`` (m) at every sample (:func:`discovery.regressors.surface_clearances`), inf
     where the scene has no such surface."""
-    rotor_z = log.p_world[:, None, 2] + np.einsum("nj,rj->nr", log.R_body_to_world[:, 2, :],
-                                                   log.vehicle.rotor_positions_array)
+    rotor_z = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)[:, :, 2]
     above_ground, below_ceiling = surface_clearances(rotor_z, log.scene)
     never = np.full(log.n_samples, np.inf)
     return (never if below_ceiling is None else below_ceiling), (never if above_ground is None else above_ground)
