@@ -113,6 +113,17 @@ def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: 
     return force
 
 
+def _pressed_surface(depth: float, v: np.ndarray, axis: int, away: float) -> np.ndarray:
+    """Force (N) of a plane pressed ``depth`` m (none when not positive), its normal along world ``axis`` with sign
+    ``away``: the contact spring and damper along the normal (never pulling) and friction along the plane."""
+    if depth <= 0:
+        return np.zeros(3)
+    normal = max(0.0, _CONTACT_STIFFNESS * depth - _CONTACT_DAMPING * away * v[axis])
+    force = -_CONTACT_FRICTION * v
+    force[axis] = away * normal
+    return force
+
+
 def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, disturbance: np.ndarray,
                 motor_lag: float, t: float, contact: bool) -> tuple:
     """d/dt of (p, v, q, w, produced thrust) with the thrust and rate command held and a disturbance force (N)."""
@@ -126,19 +137,14 @@ def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, d
     force = produced_map * R[:, 2] + hidden_force(effects, p, v, R, t, produced) + disturbance
     if "turbulence" in effects:
         force = force + effects["turbulence"](t)
-    if contact and p[2] < REST_HEIGHT:
-        normal = max(0.0, _CONTACT_STIFFNESS * (REST_HEIGHT - p[2]) - _CONTACT_DAMPING * v[2])
-        force = force + np.array([-_CONTACT_FRICTION * v[0], -_CONTACT_FRICTION * v[1], normal])
+    if contact:
+        force = force + _pressed_surface(REST_HEIGHT - p[2], v, axis=2, away=1.0)
     if WALL_GUARD_RADIUS is not None:
         depth = WALL_GUARD_RADIUS - min((p + R @ rotor)[0] for rotor in ROTORS_BODY)
-        if depth > 0:
-            normal = max(0.0, _CONTACT_STIFFNESS * depth - _CONTACT_DAMPING * v[0])
-            force = force + np.array([normal, -_CONTACT_FRICTION * v[1], -_CONTACT_FRICTION * v[2]])
+        force = force + _pressed_surface(depth, v, axis=0, away=1.0)
     if CEILING_GUARD_RADIUS is not None and "ceiling" in effects:
         depth = CEILING_GUARD_RADIUS - min(CEILING_Z - (p + R @ rotor)[2] for rotor in ROTORS_BODY)
-        if depth > 0:
-            normal = max(0.0, _CONTACT_STIFFNESS * depth + _CONTACT_DAMPING * v[2])
-            force = force + np.array([-_CONTACT_FRICTION * v[0], -_CONTACT_FRICTION * v[1], -normal])
+        force = force + _pressed_surface(depth, v, axis=2, away=-1.0)
     return (v, force / MASS - np.array([0, 0, GRAVITY]), 0.5 * _qmul(q, np.array([0.0, *w])), (w_cmd - w) / _RATE_LAG,
             thrust_dot)
 
