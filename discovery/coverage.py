@@ -36,29 +36,39 @@ from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 from discovery.regressors import rotor_centres_world, surface_clearances
 
-__all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "resting_on_ground", "ground_contact", "at_ceiling", "rotor_clearances",
-           "flight_limits", "nearest_wall", "thrust_variation", "scene_problems"]
+__all__ = ["REST_THRUST_SHARE", "CONTACT_HEIGHT", "HELD_WINDOW_S", "pushed_beyond_free", "resting_on_ground",
+           "ground_contact", "at_ceiling", "rotor_clearances", "flight_limits", "nearest_wall", "thrust_variation",
+           "scene_problems"]
 
 REST_THRUST_SHARE = 0.5  # of the weight
 NOT_FALLING = 0.25  # of g: falling this much slower than the thrust lets it, with thrust below half the weight, is held
+HELD_WINDOW_S = 0.5  # s: the acceleration beyond the thrust's that holds a vehicle is averaged over this long
 NEAR_SURFACE = 0.3  # m: wall suction, ground and ceiling effects act within about this distance
 SPEED_FOR_DRAG = 0.5  # m/s rms along a body axis to determine drag along it
 THRUST_VARIATION = 0.1  # relative standard deviation of the thrust that separates a thrust scale from a steady force
 
 
+def pushed_beyond_free(log: FlightLog, direction: np.ndarray, *, accelerometer: bool) -> np.ndarray:
+    """Samples at which the vehicle accelerates along ``direction`` by more than :data:`NOT_FALLING` g beyond what
+    the thrust and gravity give it, both averaged over :data:`HELD_WINDOW_S`: something else pushes it that way
+    (the ground holds it up, a ceiling pushes it down). The thrust's own acceleration is smoothed like the measured
+    one, so that a short, deliberate drop of the thrust in the air (a quick descent) does not look held under the
+    smoothing. With ``accelerometer`` the measured acceleration is the log's ``a_world`` where it has one;
+    otherwise, and without it, the derivative of the averaged velocity."""
+    window = max(1, int(round(HELD_WINDOW_S / float(np.median(np.diff(log.t))))))
+    measured = (moving_average(log.a_world @ direction, window) if accelerometer and log.a_world is not None
+                else np.gradient(moving_average(log.v_world @ direction, window), log.t))
+    return measured > moving_average(log.free_acceleration(direction), window) + NOT_FALLING * log.gravity
+
+
 def resting_on_ground(log: FlightLog) -> np.ndarray:
-    """Samples where something other than the thrust holds the vehicle up (see the module text)."""
+    """Samples where something other than the thrust holds the vehicle up (see the module text): the thrust carries
+    less than half the weight, so a free vehicle would fall at more than g / 2, and it falls :data:`NOT_FALLING` g
+    slower than that (:func:`pushed_beyond_free`, from the velocity)."""
     vertical = log.total_thrust * log.R_body_to_world[:, 2, 2]
     weight = log.vehicle.mass * log.gravity
-    dt = float(np.median(np.diff(log.t)))
-    window = max(1, int(round(0.5 / dt)))
-    a_z = np.gradient(moving_average(log.v_world[:, 2], window), log.t)
-    # with the thrust carrying a share s < 1/2 of the weight a free vehicle falls at (1 - s) g > g / 2; the
-    # thrust's own acceleration is smoothed like the measured one, so that a short, deliberate drop of the
-    # thrust in the air (a quick descent) does not look held up under the smoothing
-    a_z_thrust = moving_average(log.free_acceleration(np.array([0.0, 0.0, 1.0])), window)
-    not_falling = a_z > a_z_thrust + NOT_FALLING * log.gravity
-    return (vertical < REST_THRUST_SHARE * weight) & not_falling
+    return (vertical < REST_THRUST_SHARE * weight) & pushed_beyond_free(log, np.array([0.0, 0.0, 1.0]),
+                                                                        accelerometer=False)
 
 
 CONTACT_HEIGHT = 0.03  # m: within this of the height the vehicle rested at, it is still on the ground

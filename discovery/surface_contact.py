@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from discovery.coverage import NEAR_SURFACE, NOT_FALLING
+from discovery.coverage import NEAR_SURFACE, pushed_beyond_free
 from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 from discovery.regressors import rotor_centres_world, surface_clearances
@@ -68,7 +68,6 @@ CONTACT_MARGIN = 0.002  # m past the farthest strike's distance that still count
 APPROACH_SHARE = 0.5  # of the speed a jolt takes away, the least the vehicle came at the surface with before it
 PINNED_S = 1.0  # s: one strike suffices when the vehicle then stays this long within the contact distance
 PINNED_SHARE = 0.9  # of the samples over PINNED_S
-PRESSED_WINDOW_S = 0.5  # s: a push away from the surface averaged over this long, like a rest on the ground
 PRESSED_S = 0.5  # s of being pressed against a surface, in all, before it is taken to be touched
 SCATTER_FLOOR = 0.05  # m/s^2: the least scatter a jolt is measured against (a noise-free simulated log has none)
 
@@ -111,13 +110,10 @@ def outward_jolt(log: FlightLog, normal: np.ndarray) -> np.ndarray:
 def pressed_against(log: FlightLog, normal: np.ndarray) -> np.ndarray:
     """Samples at which the vehicle is pushed away from the surface whose normal is ``normal`` by more than
     :data:`discovery.coverage.NOT_FALLING` g beyond what the thrust and gravity do, both averaged over
-    :data:`PRESSED_WINDOW_S`: a vehicle whose loop drives it on into a ceiling with twice its weight in thrust, and
+    :data:`discovery.coverage.HELD_WINDOW_S` (:func:`discovery.coverage.pushed_beyond_free`, from the accelerometer
+    when the log has one): a vehicle whose loop drives it on into a ceiling with twice its weight in thrust, and
     that does not rise. No aerodynamic effect near a wall or a ceiling pushes that way (they pull toward it)."""
-    dt = float(np.median(np.diff(log.t)))
-    window = max(1, int(round(PRESSED_WINDOW_S / dt)))
-    measured = (moving_average(log.a_world @ normal, window) if log.a_world is not None
-                else np.gradient(moving_average(log.v_world @ normal, window), log.t))
-    return measured > moving_average(log.free_acceleration(normal), window) + NOT_FALLING * log.gravity
+    return pushed_beyond_free(log, normal, accelerometer=True)
 
 
 def jolt_jump(jolt: np.ndarray, half: int) -> np.ndarray:

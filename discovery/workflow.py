@@ -61,6 +61,7 @@ from discovery.cancelling import cancelling_sets, simpler
 from discovery.cancelling import manoeuvre as cancel_manoeuvre
 from discovery.coverage import (
     CONTACT_HEIGHT,
+    HELD_WINDOW_S,
     NEAR_SURFACE,
     NOT_FALLING,
     REST_THRUST_SHARE,
@@ -93,7 +94,6 @@ from discovery.selection import (
 from discovery.standins import OWN_QUANTITIES, depends_on, own_quantity, structures_for, test_effect
 from discovery.surface_contact import (
     CONTACT_MARGIN,
-    PRESSED_WINDOW_S,
     SAME_DISTANCE,
     STRIKE_WINDOW_S,
     STRIKE_Z,
@@ -816,7 +816,7 @@ class Discovery:
             if struck.pressed_s > 0:
                 evidence.append(
                     f"was pressed against {name} for {struck.pressed_s:.1f} s: pushed away from it more than "
-                    f"{NOT_FALLING:g} g beyond what the thrust and gravity do (over {PRESSED_WINDOW_S:g} s), as no "
+                    f"{NOT_FALLING:g} g beyond what the thrust and gravity do (over {HELD_WINDOW_S:g} s), as no "
                     "aerodynamic effect there pushes")
             self.notes_.append(
                 f"{log.source}: the vehicle {'; and it '.join(evidence)} (the nearest rotor centre came within "
