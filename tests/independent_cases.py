@@ -134,8 +134,14 @@ def _effects_for_flight(case: Case, seed: int) -> dict[str, Any]:
 def fly_case(case: Case, seed: int, rate: float, folder: Path, waypoints: float = 0.0) -> Path:
     """Fly ``case`` and write its log into ``folder``; returns the CSV path. ``waypoints``: see
     :func:`tests.independent_sim.fly` (0: the sinusoidal survey)."""
-    rows = fly(_effects_for_flight(case, seed), duration=case.duration, rate_hz=rate, seed=seed,
-               motor_lag=case.motor_lag, takeoff=case.takeoff, waypoints=waypoints, **case.flight)
+    guard = independent_sim.WALL_GUARD_RADIUS
+    if not case.write.get("wall", True):
+        independent_sim.WALL_GUARD_RADIUS = None  # a world without a wall has nothing to strike
+    try:
+        rows = fly(_effects_for_flight(case, seed), duration=case.duration, rate_hz=rate, seed=seed,
+                   motor_lag=case.motor_lag, takeoff=case.takeoff, waypoints=waypoints, **case.flight)
+    finally:
+        independent_sim.WALL_GUARD_RADIUS = guard
     return write(rows, folder / f"{case.name}_{seed}.csv", seed=seed, **case.write)
 
 
@@ -278,7 +284,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="the vehicle's mass, kg (default %(default)s); the loop's gains are accelerations, so a "
                              "light vehicle resists wall suction's pull (N/m) less")
     parser.add_argument("--wall-guard", type=float, default=None,
-                        help="the wall stops each rotor's guard of this radius, m (default: the vehicle passes through)")
+                        help="the wall stops each rotor's guard of this radius, m, in worlds whose scene has a wall "
+                             "(default: the vehicle passes through)")
     parser.add_argument("--ceiling-guard", type=float, default=None,
                         help="the ceiling stops each rotor's guard of this radius, m (default: the vehicle passes "
                              "through)")

@@ -36,8 +36,9 @@ REST_HEIGHT = 0.06  # m, height of the centre of mass (and the rotors) resting o
 _CONTACT_STIFFNESS = 3000.0  # N/m
 _CONTACT_DAMPING = 80.0  # N s/m
 _CONTACT_FRICTION = 20.0  # N s/m, horizontal, while in contact
-#: with a number, the wall at x = 0 stops the vehicle: each rotor's guard (this radius, m, around the rotor centre)
-#: meets it through the ground's spring, damper and friction; None (the default) lets the vehicle through it
+#: with a number, the wall at x = 0 (below its ``wall_top`` when one is flown) stops the vehicle: each rotor's guard
+#: (this radius, m, around the rotor centre) meets it through the ground's spring, damper and friction; None (the
+#: default) lets the vehicle through it
 WALL_GUARD_RADIUS: float | None = None
 #: the same for the ceiling (when a ceiling effect is flown): the guards meet it at CEILING_Z
 CEILING_GUARD_RADIUS: float | None = None
@@ -140,7 +141,9 @@ def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, d
     if contact:
         force = force + _pressed_surface(REST_HEIGHT - p[2], v, axis=2, away=1.0)
     if WALL_GUARD_RADIUS is not None:
-        depth = WALL_GUARD_RADIUS - min((p + R @ rotor)[0] for rotor in ROTORS_BODY)
+        top = effects.get("wall_top", math.inf)  # a rotor above a wall's top passes over it
+        depth = WALL_GUARD_RADIUS - min(((p + R @ rotor)[0] for rotor in ROTORS_BODY if (p + R @ rotor)[2] <= top),
+                                        default=math.inf)
         force = force + _pressed_surface(depth, v, axis=0, away=1.0)
     if CEILING_GUARD_RADIUS is not None and "ceiling" in effects:
         depth = CEILING_GUARD_RADIUS - min(CEILING_Z - (p + R @ rotor)[2] for rotor in ROTORS_BODY)
