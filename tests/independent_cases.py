@@ -24,6 +24,7 @@ import math
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -131,17 +132,25 @@ def _effects_for_flight(case: Case, seed: int) -> dict[str, Any]:
     return effects
 
 
+@contextlib.contextmanager
+def _wall_guard_only_if(wall: bool) -> Iterator[None]:
+    """The second simulator's wall guard (``--wall-guard``) while flying a world whose scene has a wall; a world
+    without one has nothing to strike."""
+    guard = independent_sim.WALL_GUARD_RADIUS
+    if not wall:
+        independent_sim.WALL_GUARD_RADIUS = None
+    try:
+        yield
+    finally:
+        independent_sim.WALL_GUARD_RADIUS = guard
+
+
 def fly_case(case: Case, seed: int, rate: float, folder: Path, waypoints: float = 0.0) -> Path:
     """Fly ``case`` and write its log into ``folder``; returns the CSV path. ``waypoints``: see
     :func:`tests.independent_sim.fly` (0: the sinusoidal survey)."""
-    guard = independent_sim.WALL_GUARD_RADIUS
-    if not case.write.get("wall", True):
-        independent_sim.WALL_GUARD_RADIUS = None  # a world without a wall has nothing to strike
-    try:
+    with _wall_guard_only_if(case.write.get("wall", True)):
         rows = fly(_effects_for_flight(case, seed), duration=case.duration, rate_hz=rate, seed=seed,
                    motor_lag=case.motor_lag, takeoff=case.takeoff, waypoints=waypoints, **case.flight)
-    finally:
-        independent_sim.WALL_GUARD_RADIUS = guard
     return write(rows, folder / f"{case.name}_{seed}.csv", seed=seed, **case.write)
 
 
@@ -245,8 +254,9 @@ def run_winds(seed: int, rate: float, folder: Path, n_flights: int = 3, waypoint
     shared, flights = winds_case(seed)
     paths = []
     for i, flight in enumerate(flights[:n_flights]):
-        rows = fly({"quadratic_drag": (shared["C"], flight["w"])}, duration=60.0, rate_hz=rate, seed=seed * 10 + i,
-                   waypoints=waypoints, **FAST)
+        with _wall_guard_only_if(False):
+            rows = fly({"quadratic_drag": (shared["C"], flight["w"])}, duration=60.0, rate_hz=rate,
+                       seed=seed * 10 + i, waypoints=waypoints, **FAST)
         paths.append(write(rows, folder / f"winds_{seed}_{i}.csv", seed=seed * 10 + i, wall=False))
     report = discover(paths, folder / f"winds_{seed}")
     effect = next((e for e in report["effects"] if e["name"] == "quadratic_drag"), None)
