@@ -18,6 +18,12 @@ at or nearer than the distance they happened at; the workflow leaves those out w
 "wall contact" or "ceiling contact". The ground is not asked: a touchdown is a strike on it by
 design, and :mod:`discovery.coverage` leaves the ground's rests and touchdowns out.
 
+A surface the scene does not have (a wall missing from the sidecar, a net, an obstacle) is found by
+:func:`undeclared_strikes`: the same strikes against a plane where the rotor centres went farthest,
+for a ring of horizontal normals and one facing down; the normal nearest the strikes' own push is
+the surface's. Nothing near it is fitted, so its contact is taken generously: from where each
+strike's push began.
+
 Without an accelerometer column the jolt is read from the logged velocity; a velocity estimate
 smoothed over more than the jolt's window (a filtered motion-capture derivative, say 50 ms) spreads
 a strike too thin to find, and the contact is then fitted as a pull too weak. Log the
@@ -47,7 +53,7 @@ it there after the first strike (a 2.5 cm guard on a light vehicle), so it never
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -56,8 +62,9 @@ from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 from discovery.regressors import rotor_centres_world, surface_clearances
 
-__all__ = ["Strikes", "surface_strikes", "outward_jolt", "jolt_jump", "pressed_against", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES",
-           "SAME_DISTANCE", "CONTACT_MARGIN"]
+__all__ = ["Strikes", "surface_strikes", "undeclared_strikes", "outward_jolt", "jolt_jump", "pressed_against",
+           "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES", "SAME_DISTANCE", "CONTACT_MARGIN", "UNDECLARED_CONTACT",
+           "UNDECLARED_DIRECTIONS"]
 
 STRIKE_WINDOW_S = 0.03  # s: a guard stops the vehicle in about this long; the loop's braking takes hundreds of ms
 STRIKE_Z = 4.0  # robust standard deviations of the log's jumps (jolt_jump) a strike's jump exceeds
@@ -70,19 +77,26 @@ PINNED_S = 1.0  # s: one strike suffices when the vehicle then stays this long w
 PINNED_SHARE = 0.9  # of the samples over PINNED_S
 PRESSED_S = 0.5  # s of being pressed against a surface, in all, before it is taken to be touched
 SCATTER_FLOOR = 0.05  # m/s^2: the least scatter a jolt is measured against (a noise-free simulated log has none)
+ONSET_Z = 2.0  # robust standard deviations: a strike's push began where its jump last rose above this
+UNDECLARED_CONTACT = "contact with a surface not in the scene"  # the reason its samples are left out
+UNDECLARED_DIRECTIONS = 36  # horizontal normals tried for a surface the scene does not have (10 degrees apart)
+UNDECLARED_OFF_DEG = 45.0  # degrees: the most a struck normal may be off its strikes' mean push
 
 
 @dataclass(frozen=True)
 class Strikes:
     """The strikes on one surface of a log's scene and the samples in contact with it."""
 
-    surface: str  # "wall 0", "wall 1", ... or "ceiling"
-    effect: str  # the effect whose pull acts there: "wall_suction" or "ceiling_effect"
+    surface: str  # "wall 0", "wall 1", ... or "ceiling"; or "a surface not in the scene, facing ..."
+    effect: str | None  # the effect whose pull acts there: "wall_suction" or "ceiling_effect"; None if undeclared
+    normal: np.ndarray  # (3,) the surface's unit normal into free space
     times: np.ndarray  # (strikes,) s: the strongest jump of each strike (empty when only pressed against it)
     pressed_s: float  # s the vehicle was pressed against the surface (pressed_against), within NEAR_SURFACE
     closest: float  # m: the nearest rotor centre's closest approach to the surface's plane
     touch_distance: float  # m: the farthest strike's distance plus CONTACT_MARGIN; nearer than this is contact
     in_contact: np.ndarray  # (n,) bool: nearer the surface than touch_distance, or within STRIKE_WINDOW_S of it
+    stopped_at: float | None = None  # m along the normal (world) where the rotor centres went farthest against it:
+    # where the strikes stopped them; given for a surface not in the scene, whose place they are all we know of
 
 
 def outward_jolt(log: FlightLog, normal: np.ndarray) -> np.ndarray:
@@ -181,42 +195,105 @@ def surface_strikes(log: FlightLog) -> list[Strikes]:
     if log.n_samples < 3:
         return []
     rotors_world = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)
-    dt = float(np.median(np.diff(log.t)))
-    half = _half_window(log)
     out = []
     for surface, effect, normal, distance in _planes(log, rotors_world):
         closest = float(distance.min())
         if closest >= NEAR_SURFACE:
             continue
-        jolt = jolt_jump(outward_jolt(log, normal), half)
-        finite = np.isfinite(jolt)
-        if finite.sum() < 3:
-            continue
-        centre = float(np.median(jolt[finite]))
-        scatter = max(SCATTER_FLOOR, 1.4826 * float(np.median(np.abs(jolt[finite] - centre))))
         # a rotor centre past the plane is a scene error (reported as such), not a guard touching the surface
-        hits = np.flatnonzero(finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter)
-                              & (distance < closest + SAME_DISTANCE) & (distance > 0))
-        hits = hits[[_was_approaching(log, normal, int(i), float(jolt[i]), half) for i in hits]]
-        strikes: list[list[int]] = []
-        for i in hits:
-            if strikes and log.t[i] - log.t[strikes[-1][-1]] <= STRIKE_SEPARATION_S:
-                strikes[-1].append(int(i))
-            else:
-                strikes.append([int(i)])
-        pressed = pressed_against(log, normal) & (distance < NEAR_SURFACE) & (distance > 0)
-        struck = len(strikes) >= MIN_STRIKES or any(
-            _stays_pinned(log.t, distance, s[-1], float(distance[hits].max()) + CONTACT_MARGIN) for s in strikes)
-        if not struck and pressed.sum() * dt < PRESSED_S:
-            continue
-        touching = np.concatenate([hits if struck else np.zeros(0, dtype=int), np.flatnonzero(pressed)])
-        touch = float(distance[touching].max()) + CONTACT_MARGIN
-        peaks = np.array([log.t[max(s, key=lambda i: jolt[i])] for s in strikes]) if struck else np.zeros(0)
-        # widened by the jolt's window on each side: a stiff guard bounces the vehicle off in a sample or two, too
-        # short a gap to cut the log there, and the residual's smoothing would carry the impulse into the samples
-        # kept on either side
-        pad = max(1, int(round(STRIKE_WINDOW_S / dt)))
-        in_contact = np.convolve((distance < touch).astype(float), np.ones(2 * pad + 1), mode="same") > 0
-        out.append(Strikes(surface=surface, effect=effect, times=peaks, pressed_s=float(pressed.sum() * dt),
-                           closest=closest, touch_distance=touch, in_contact=in_contact))
+        struck = _strikes_on(log, surface, effect, normal, distance, closest, candidates=distance > 0, pressed=True)
+        if struck is not None:
+            out.append(struck)
     return out
+
+
+def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
+    """Surfaces the scene does not have that the vehicle struck: a wall, a net or an obstacle missing from the
+    sidecar. The same strikes as on a declared surface (:func:`surface_strikes`, without the press) against a plane
+    where the rotor centres went farthest, tried for :data:`UNDECLARED_DIRECTIONS` horizontal normals and one facing
+    down (a ceiling); the samples ``excluded`` (already left out: rests, contact with declared surfaces) neither strike
+    nor place the plane. A strike pushes the vehicle along the surface's normal, so of the normals whose planes were
+    struck the one nearest the strikes' mean push is taken (a flight to and fro along one line strikes the plane
+    of every normal within 90 degrees of the true one at the same moments), if within :data:`UNDECLARED_OFF_DEG`
+    of it; then any other with :data:`MIN_STRIKES` strikes of its own, at other moments (a corner). ``effect`` is
+    None."""
+    if log.n_samples < 3 or excluded.all():
+        return []
+    rotors_world = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)
+    half = _half_window(log)
+    pushes = np.column_stack([jolt_jump(outward_jolt(log, axis), half) for axis in np.eye(3)])  # (n, 3) m/s^2
+    angles = 2.0 * np.pi * np.arange(UNDECLARED_DIRECTIONS) / UNDECLARED_DIRECTIONS
+    normals = [np.array([np.cos(a), np.sin(a), 0.0]) for a in angles] + [np.array([0.0, 0.0, -1.0])]
+    found = []
+    for normal in normals:
+        along = (rotors_world @ normal).min(axis=1)
+        stopped_at = float(along[~excluded].min())
+        name = "a surface not in the scene, facing " + ", ".join(f"{c:+.2f}" for c in normal)
+        struck = _strikes_on(log, name, None, normal, along - stopped_at, 0.0, candidates=~excluded, pressed=False,
+                             from_onset=True)
+        if struck is None:
+            continue
+        push = np.nanmean(pushes[np.searchsorted(log.t, struck.times)], axis=0)
+        alignment = float(normal @ push) / max(float(np.linalg.norm(push)), 1e-12)
+        if alignment >= np.cos(np.radians(UNDECLARED_OFF_DEG)):
+            found.append((alignment, replace(struck, stopped_at=stopped_at)))
+    out: list[Strikes] = []
+    for _, struck in sorted(found, key=lambda f: -f[0]):
+        taken = np.concatenate([np.zeros(0), *(other.times for other in out)])
+        own = [t for t in struck.times if not np.any(np.abs(taken - t) <= STRIKE_SEPARATION_S)]
+        if not out or len(own) >= MIN_STRIKES:
+            out.append(struck)
+    return out
+
+
+def _onset(jump: np.ndarray, level: float, first: int, half: int) -> np.ndarray:
+    """The samples where the push of the strike whose first hit is ``first`` began: back from it while the ``jump``
+    stays above ``level``, and the jolt's window before that."""
+    start = first
+    while start > 0 and np.isfinite(jump[start - 1]) and jump[start - 1] > level:
+        start -= 1
+    return np.arange(max(0, start - half), start + 1)
+
+
+def _strikes_on(log: FlightLog, surface: str, effect: str | None, normal: np.ndarray, distance: np.ndarray,
+                closest: float, *, candidates: np.ndarray, pressed: bool, from_onset: bool = False) -> Strikes | None:
+    """The strikes on one plane (unit ``normal`` into free space, the nearest rotor centre ``distance`` from it at
+    every sample, ``closest`` at the nearest) at the samples ``candidates``, and the samples in contact; None when
+    it was not touched. With ``pressed``, a vehicle pressed against it (:func:`pressed_against`) has touched it
+    too. With ``from_onset`` the contact reaches as far as any strike's push began (:data:`ONSET_Z`), not only as
+    far as its strongest samples: generous for a fast strike, whose 30 ms window spans centimetres of travel."""
+    dt = float(np.median(np.diff(log.t)))
+    half = _half_window(log)
+    jolt = jolt_jump(outward_jolt(log, normal), half)
+    finite = np.isfinite(jolt)
+    if finite.sum() < 3:
+        return None
+    centre = float(np.median(jolt[finite]))
+    scatter = max(SCATTER_FLOOR, 1.4826 * float(np.median(np.abs(jolt[finite] - centre))))
+    hits = np.flatnonzero(finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter)
+                          & (distance < closest + SAME_DISTANCE) & candidates)
+    hits = hits[[_was_approaching(log, normal, int(i), float(jolt[i]), half) for i in hits]]
+    strikes: list[list[int]] = []
+    for i in hits:
+        if strikes and log.t[i] - log.t[strikes[-1][-1]] <= STRIKE_SEPARATION_S:
+            strikes[-1].append(int(i))
+        else:
+            strikes.append([int(i)])
+    against = (pressed_against(log, normal) & (distance < NEAR_SURFACE) & candidates if pressed
+               else np.zeros(log.n_samples, dtype=bool))
+    struck = len(strikes) >= MIN_STRIKES or any(
+        _stays_pinned(log.t, distance, s[-1], float(distance[hits].max()) + CONTACT_MARGIN) for s in strikes)
+    if not struck and against.sum() * dt < PRESSED_S:
+        return None
+    touching = np.concatenate([hits if struck else np.zeros(0, dtype=int), np.flatnonzero(against)])
+    if from_onset and struck:
+        touching = np.concatenate([touching, *(_onset(jolt, centre + ONSET_Z * scatter, s[0], half) for s in strikes)])
+    touch = float(distance[touching].max()) + CONTACT_MARGIN
+    peaks = np.array([log.t[max(s, key=lambda i: jolt[i])] for s in strikes]) if struck else np.zeros(0)
+    # widened by the jolt's window on each side: a stiff guard bounces the vehicle off in a sample or two, too
+    # short a gap to cut the log there, and the residual's smoothing would carry the impulse into the samples
+    # kept on either side
+    pad = max(1, int(round(STRIKE_WINDOW_S / dt)))
+    in_contact = np.convolve((distance < touch).astype(float), np.ones(2 * pad + 1), mode="same") > 0
+    return Strikes(surface=surface, effect=effect, normal=normal, times=peaks, pressed_s=float(against.sum() * dt),
+                   closest=closest, touch_distance=touch, in_contact=in_contact)

@@ -97,7 +97,9 @@ from discovery.surface_contact import (
     SAME_DISTANCE,
     STRIKE_WINDOW_S,
     STRIKE_Z,
+    UNDECLARED_CONTACT,
     surface_strikes,
+    undeclared_strikes,
 )
 from discovery.thrust_map import ThrustMap, written_effects
 from discovery.unexplained import is_unexplained, where_it_lives
@@ -831,6 +833,28 @@ class Discovery:
                           f"{1e3 * struck.touch_distance:.0f} mm (rotor centre) are {reason}, left out, so {pull} "
                           "there is not measured",
                 "manoeuvre": f"approach the {kind} slowly and turn back short of touching it, at several distances"})
+        declared = np.logical_or.reduce([np.zeros(log.n_samples, dtype=bool), *by_reason.values()])
+        excluded = held | declared
+        for struck in undeclared_strikes(log, excluded):
+            in_contact = struck.in_contact & ~declared
+            for a, b in zip(edges[::2], edges[1::2]):
+                if in_contact[a:b].any():
+                    in_contact[a:b] = True
+            reason = UNDECLARED_CONTACT
+            by_reason[reason] = by_reason.get(reason, np.zeros(log.n_samples, dtype=bool)) | in_contact
+            at = ", ".join(f"{t:.2f}" for t in struck.times[:MAX_TIMES_LISTED])
+            more = f" and {len(struck.times) - MAX_TIMES_LISTED} more" if len(struck.times) > MAX_TIMES_LISTED else ""
+            normal = "(" + ", ".join(f"{c:+.2f}" for c in struck.normal) + ")"
+            reach = struck.stopped_at
+            self.notes_.append(
+                f"{log.source}: the vehicle struck a surface the scene does not have {len(struck.times)} times (t = "
+                f"{at}{more} s): each time pushed along {normal} (world) more than {STRIKE_Z:g} times the log's own "
+                f"scatter beyond what the thrust and gravity do, within {1e3 * STRIKE_WINDOW_S:g} ms, where its rotor "
+                f"centres went farthest against that direction (within {1e3 * SAME_DISTANCE:g} mm of {reach:.3f} m "
+                f"along it). {in_contact.sum() * dt:.1f} s there (or held there) are left out as {reason}, a force "
+                "that is not aerodynamic. If it is a wall or a ceiling, add it to the scene (sidecar or --scene) "
+                f"with the normal {normal}: the rotor centres stopped {reach:.3f} m along it, so the plane lies there "
+                "less the reach of the vehicle's guards; its suction or ceiling effect can then be fitted too")
         return by_reason
 
     @staticmethod

@@ -203,6 +203,33 @@ def test_a_vehicle_that_strikes_the_wall_is_left_out_in_contact_and_the_suction_
     assert any(limit["effects"] == ["wall_suction"] and "touched wall 0" in limit["reason"] for limit in found.limits_)
 
 
+def test_strikes_on_a_wall_missing_from_the_scene_are_found_left_out_and_the_drag_fitted_on_the_rest(tmp_path,
+                                                                                                     monkeypatch):
+    """A 0.6 kg vehicle flies a fast survey in wind; its sidecar has no wall, but a wall at x = 0 stops its rotors'
+    4 cm guards twelve times and holds it there. That contact was fitted as a 0.45 thrust scale and a 3.3 N upward
+    steady force, with 1.5 N unexplained. The strikes are now found against a plane where the rotor centres went
+    farthest, along the tried normal nearest their push, and left out; the quadratic drag is fitted on the rest."""
+    import tests.independent_sim as sim
+    from discovery.surface_contact import UNDECLARED_CONTACT
+
+    monkeypatch.setattr(sim, "MASS", 0.6)
+    monkeypatch.setattr(sim, "WALL_GUARD_RADIUS", 0.04)
+    C, wind = [0.12, 0.09, 0.07], [1.6, -1.2, 0.0]
+    rows = fly({"quadratic_drag": (C, wind)}, centre=(1.5, 0.0, 1.0), amplitude=(2.0, 2.0, 0.4),
+               period=(5.0, 6.0, 3.0), duration=60.0, rate_hz=100.0, seed=7861)
+    found = _discover(write(rows, tmp_path / "unseen_wall.csv", seed=7861, wall=False))
+    assert {x["reason"] for x in found.left_out_} == {UNDECLARED_CONTACT}
+    note = next(n for n in found.notes_ if "struck a surface the scene does not have" in n)
+    assert "pushed along (+1.00, +0.00, +0.00)" in note
+    strikes = int(note.split("does not have ")[1].split(" times")[0])
+    assert strikes >= 10  # one or two each time the survey swings to x = -0.5 m, every 5 s
+    assert found.names_ == ["quadratic_drag"]
+    fitted = found.effects_[0].values
+    assert max(relative_errors({"C": fitted["C"]}, {"C": C})) < 0.1
+    assert np.linalg.norm(np.asarray(fitted["w"]) - wind) < 0.1 * np.linalg.norm(wind)
+    assert found.gap_after_["force_rms_N"] < 0.05 * found.gap_before_["force_rms_N"]
+
+
 def test_a_vehicle_pressed_against_the_ceiling_is_left_out_in_contact_and_the_ceiling_effect_fitted_beyond_it(
         tmp_path, monkeypatch):
     """Where the image-rotor gain levels off only at 0.3 radii, a survey 8 cm under the ceiling is drawn up onto it,

@@ -15,6 +15,7 @@ from discovery.surface_contact import (
     outward_jolt,
     pressed_against,
     surface_strikes,
+    undeclared_strikes,
 )
 from wall_env.scene import Scene, Wall
 from wall_env.vehicle import VehicleParams
@@ -205,3 +206,39 @@ def test_the_jump_measures_a_strike_from_the_pull_the_vehicle_was_under_just_bef
     assert 3.6 < jump[strike] < 3.8
     quiet = np.isfinite(jump) & (np.abs(np.arange(200) - strike) > 3 * width)
     assert np.abs(jump[quiet]).max() < 0.04  # the pull changes by at most 0.63 m/s^3 x 50 ms = 0.03 m/s^2
+
+
+def _turned(log: FlightLog, yaw: float, scene: Scene) -> FlightLog:
+    """``log`` turned by ``yaw`` (rad) about the world's z axis, in ``scene``."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    R_turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    q_turn = np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+    w, x, y, z = log.q_body_to_world.T  # q_turn * q, q_turn about z only
+    q = np.column_stack([q_turn[0] * w - q_turn[3] * z, q_turn[0] * x - q_turn[3] * y, q_turn[0] * y + q_turn[3] * x,
+                         q_turn[0] * z + q_turn[3] * w])
+    return FlightLog(**{**log.__dict__, "p_world": log.p_world @ R_turn.T, "v_world": log.v_world @ R_turn.T,
+                        "q_body_to_world": q, "scene": scene,
+                        "a_world": None if log.a_world is None else log.a_world @ R_turn.T})
+
+
+def test_strikes_on_a_wall_the_scene_does_not_have_name_its_normal_and_where_the_vehicle_stopped():
+    """The same five strikes with the wall missing from the scene, and the world turned 35 degrees about z: the wall's
+    normal is (cos 35, sin 35, 0). No declared surface is struck; the undeclared one is found along the tried normal
+    nearest it (10 degrees apart), where the rotor centres stopped, and every sample the wall held is in contact. A
+    survey that turns back short of the wall strikes nothing."""
+    yaw = np.radians(35.0)
+    log, held = _survey(depth=0.005)
+    turned = _turned(log, yaw, Scene((), 0.0, None))
+    assert surface_strikes(turned) == []
+    (struck,) = undeclared_strikes(turned, np.zeros(turned.n_samples, dtype=bool))
+    assert struck.effect is None and len(struck.times) == 5
+    assert np.degrees(np.arccos(struck.normal @ [np.cos(yaw), np.sin(yaw), 0.0])) <= 5.0 + 1e-9
+    rotors = turned.p_world[:, None, :] + np.einsum("nij,rj->nri", turned.R_body_to_world,
+                                                    turned.vehicle.rotor_positions_array)
+    assert struck.stopped_at == pytest.approx((rotors @ struck.normal).min(), abs=1e-12)
+    assert struck.in_contact[held].all()
+    # samples already left out (a rest, say) neither strike nor place the plane: without the strikes, nothing
+    assert undeclared_strikes(turned, struck.in_contact) == []
+    short, held = _survey(depth=-0.001)
+    assert not held.any() and undeclared_strikes(_turned(short, yaw, Scene((), 0.0, None)),
+                                                 np.zeros(short.n_samples, dtype=bool)) == []
