@@ -80,7 +80,6 @@ SCATTER_FLOOR = 0.05  # m/s^2: the least scatter a jolt is measured against (a n
 ONSET_Z = 2.0  # robust standard deviations: a strike's push began where its jump last rose above this
 UNDECLARED_CONTACT = "contact with a surface not in the scene"  # the reason its samples are left out
 UNDECLARED_DIRECTIONS = 36  # horizontal normals tried for a surface the scene does not have (10 degrees apart)
-UNDECLARED_OFF_DEG = 45.0  # degrees: the most a struck normal may be off its strikes' mean push
 
 
 @dataclass(frozen=True)
@@ -214,9 +213,9 @@ def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
     down (a ceiling); the samples ``excluded`` (already left out: rests, contact with declared surfaces) neither strike
     nor place the plane. A strike pushes the vehicle along the surface's normal, so of the normals whose planes were
     struck the one nearest the strikes' mean push is taken (a flight to and fro along one line strikes the plane
-    of every normal within 90 degrees of the true one at the same moments), if within :data:`UNDECLARED_OFF_DEG`
-    of it; then any other with :data:`MIN_STRIKES` strikes of its own, at other moments (a corner). ``effect`` is
-    None."""
+    of every normal within 90 degrees of the true one at the same moments); then any other with
+    :data:`MIN_STRIKES` strikes of its own, at other moments (a corner). The push is not asked to lie along the
+    normal: friction on a guard that slides along the surface may push harder. ``effect`` is None."""
     if log.n_samples < 3 or excluded.all():
         return []
     rotors_world = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)
@@ -234,9 +233,8 @@ def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
         if struck is None:
             continue
         push = np.nanmean(pushes[np.searchsorted(log.t, struck.times)], axis=0)
-        alignment = float(normal @ push) / max(float(np.linalg.norm(push)), 1e-12)
-        if alignment >= np.cos(np.radians(UNDECLARED_OFF_DEG)):
-            found.append((alignment, replace(struck, stopped_at=stopped_at)))
+        found.append((float(normal @ push) / max(float(np.linalg.norm(push)), 1e-12),
+                      replace(struck, stopped_at=stopped_at)))
     out: list[Strikes] = []
     for _, struck in sorted(found, key=lambda f: -f[0]):
         taken = np.concatenate([np.zeros(0), *(other.times for other in out)])

@@ -242,3 +242,15 @@ def test_strikes_on_a_wall_the_scene_does_not_have_name_its_normal_and_where_the
     short, held = _survey(depth=-0.001)
     assert not held.any() and undeclared_strikes(_turned(short, yaw, Scene((), 0.0, None)),
                                                  np.zeros(short.n_samples, dtype=bool)) == []
+
+
+def test_strikes_on_a_ceiling_the_scene_does_not_have_face_down():
+    """The survey up and down under a ceiling missing from the scene: the strikes are found facing down, and the
+    rotors stopped at the ceiling's height less the stop."""
+    log, held = _survey(depth=0.005, ceiling=True)
+    log = FlightLog(**{**log.__dict__, "scene": Scene((), 0.0, None)})
+    assert surface_strikes(log) == []
+    (struck,) = undeclared_strikes(log, np.zeros(log.n_samples, dtype=bool))
+    assert np.allclose(struck.normal, [0.0, 0.0, -1.0]) and len(struck.times) == 5
+    assert struck.stopped_at == pytest.approx(-(CEILING_Z - STOP), abs=1e-4)  # along -z: minus the height
+    assert struck.in_contact[held].all()
