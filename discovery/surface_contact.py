@@ -84,7 +84,7 @@ UNDECLARED_DIRECTIONS = 36  # horizontal normals tried for a surface the scene d
 
 @dataclass(frozen=True)
 class Strikes:
-    """The strikes on one surface of a log's scene and the samples in contact with it."""
+    """The strikes on one surface of a log's scene (or one it does not have) and the samples in contact with it."""
 
     surface: str  # "wall 0", "wall 1", ... or "ceiling"; or "a surface not in the scene, facing ..."
     effect: str | None  # the effect whose pull acts there: "wall_suction" or "ceiling_effect"; None if undeclared
@@ -92,7 +92,8 @@ class Strikes:
     times: np.ndarray  # (strikes,) s: the strongest jump of each strike (empty when only pressed against it)
     pressed_s: float  # s the vehicle was pressed against the surface (pressed_against), within NEAR_SURFACE
     closest: float  # m: the nearest rotor centre's closest approach to the surface's plane
-    touch_distance: float  # m: the farthest strike's distance plus CONTACT_MARGIN; nearer than this is contact
+    touch_distance: float  # m: the farthest strike's (or its push's onset's) distance plus CONTACT_MARGIN; nearer
+    # than this is contact
     in_contact: np.ndarray  # (n,) bool: nearer the surface than touch_distance, or within STRIKE_WINDOW_S of it
     stopped_at: float | None = None  # m along the normal (world) where the rotor centres went farthest against it:
     # where the strikes stopped them; given for a surface not in the scene, whose place they are all we know of
@@ -200,7 +201,9 @@ def surface_strikes(log: FlightLog) -> list[Strikes]:
         if closest >= NEAR_SURFACE:
             continue
         # a rotor centre past the plane is a scene error (reported as such), not a guard touching the surface
-        struck = _strikes_on(log, surface, effect, normal, distance, closest, candidates=distance > 0, pressed=True)
+        jump = jolt_jump(outward_jolt(log, normal), _half_window(log))
+        struck = _strikes_on(log, surface, effect, normal, distance, closest, jump, candidates=distance > 0,
+                             pressed=True)
         if struck is not None:
             out.append(struck)
     return out
@@ -219,8 +222,8 @@ def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
     if log.n_samples < 3 or excluded.all():
         return []
     rotors_world = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)
-    half = _half_window(log)
-    pushes = np.column_stack([jolt_jump(outward_jolt(log, axis), half) for axis in np.eye(3)])  # (n, 3) m/s^2
+    # the jump along a normal is the jumps along the world axes projected on it (the jolt is linear in the normal)
+    pushes = np.column_stack([jolt_jump(outward_jolt(log, axis), _half_window(log)) for axis in np.eye(3)])
     angles = 2.0 * np.pi * np.arange(UNDECLARED_DIRECTIONS) / UNDECLARED_DIRECTIONS
     normals = [np.array([np.cos(a), np.sin(a), 0.0]) for a in angles] + [np.array([0.0, 0.0, -1.0])]
     found = []
@@ -228,8 +231,8 @@ def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
         along = (rotors_world @ normal).min(axis=1)
         stopped_at = float(along[~excluded].min())
         name = "a surface not in the scene, facing " + ", ".join(f"{c:+.2f}" for c in normal)
-        struck = _strikes_on(log, name, None, normal, along - stopped_at, 0.0, candidates=~excluded, pressed=False,
-                             from_onset=True)
+        struck = _strikes_on(log, name, None, normal, along - stopped_at, 0.0, pushes @ normal, candidates=~excluded,
+                             pressed=False, from_onset=True)
         if struck is None:
             continue
         push = np.nanmean(pushes[np.searchsorted(log.t, struck.times)], axis=0)
@@ -254,15 +257,16 @@ def _onset(jump: np.ndarray, level: float, first: int, half: int) -> np.ndarray:
 
 
 def _strikes_on(log: FlightLog, surface: str, effect: str | None, normal: np.ndarray, distance: np.ndarray,
-                closest: float, *, candidates: np.ndarray, pressed: bool, from_onset: bool = False) -> Strikes | None:
+                closest: float, jolt: np.ndarray, *, candidates: np.ndarray, pressed: bool,
+                from_onset: bool = False) -> Strikes | None:
     """The strikes on one plane (unit ``normal`` into free space, the nearest rotor centre ``distance`` from it at
-    every sample, ``closest`` at the nearest) at the samples ``candidates``, and the samples in contact; None when
-    it was not touched. With ``pressed``, a vehicle pressed against it (:func:`pressed_against`) has touched it
-    too. With ``from_onset`` the contact reaches as far as any strike's push began (:data:`ONSET_Z`), not only as
-    far as its strongest samples: generous for a fast strike, whose 30 ms window spans centimetres of travel."""
+    every sample, ``closest`` at the nearest; ``jolt`` the :func:`jolt_jump` along the normal) at the samples
+    ``candidates``, and the samples in contact; None when it was not touched. With ``pressed``, a vehicle pressed
+    against it (:func:`pressed_against`) has touched it too. With ``from_onset`` the contact reaches as far as any
+    strike's push began (:data:`ONSET_Z`), not only as far as its strongest samples: generous for a fast strike,
+    whose 30 ms window spans centimetres of travel."""
     dt = float(np.median(np.diff(log.t)))
     half = _half_window(log)
-    jolt = jolt_jump(outward_jolt(log, normal), half)
     finite = np.isfinite(jolt)
     if finite.sum() < 3:
         return None
