@@ -80,6 +80,7 @@ SCATTER_FLOOR = 0.05  # m/s^2: the least scatter a jolt is measured against (a n
 ONSET_Z = 2.0  # robust standard deviations: a strike's push began where its jump last rose above this
 UNDECLARED_CONTACT = "contact with a surface not in the scene"  # the reason its samples are left out
 UNDECLARED_DIRECTIONS = 36  # horizontal normals tried for a surface the scene does not have (10 degrees apart)
+UNDECLARED_APART_DEG = 45.0  # degrees: normals nearer than this to one taken are the same undeclared surface
 
 
 @dataclass(frozen=True)
@@ -216,8 +217,10 @@ def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
     down (a ceiling); the samples ``excluded`` (already left out: rests, contact with declared surfaces) neither strike
     nor place the plane. A strike pushes the vehicle along the surface's normal, so of the normals whose planes were
     struck the one nearest the strikes' mean push is taken (a flight to and fro along one line strikes the plane
-    of every normal within 90 degrees of the true one at the same moments); then any other with
-    :data:`MIN_STRIKES` strikes of its own, at other moments (a corner). The push is not asked to lie along the
+    of every normal within 90 degrees of the true one at the same moments). A normal within
+    :data:`UNDECLARED_APART_DEG` of one taken, with strikes at other moments, is the same surface met where its
+    tilted plane touches the flight: its strikes and contact join that one's. Farther off, a normal with
+    :data:`MIN_STRIKES` strikes of its own is another surface (a corner). The push is not asked to lie along the
     normal: friction on a guard that slides along the surface may push harder. ``effect`` is None."""
     if log.n_samples < 3 or excluded.all():
         return []
@@ -241,8 +244,14 @@ def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
     out: list[Strikes] = []
     for _, struck in sorted(found, key=lambda f: -f[0]):
         taken = np.concatenate([np.zeros(0), *(other.times for other in out)])
-        own = [t for t in struck.times if not np.any(np.abs(taken - t) <= STRIKE_SEPARATION_S)]
-        if not out or len(own) >= MIN_STRIKES:
+        own = np.array([t for t in struck.times if not np.any(np.abs(taken - t) <= STRIKE_SEPARATION_S)])
+        same = [k for k, other in enumerate(out)
+                if float(struck.normal @ other.normal) >= np.cos(np.radians(UNDECLARED_APART_DEG))]
+        if same and own.size:  # the same surface, struck where its plane at this tilt meets the flight
+            other = out[same[0]]
+            out[same[0]] = replace(other, times=np.sort(np.concatenate([other.times, own])),
+                                   in_contact=other.in_contact | struck.in_contact)
+        elif not same and (not out or own.size >= MIN_STRIKES):
             out.append(struck)
     return out
 
