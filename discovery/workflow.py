@@ -792,27 +792,31 @@ class Discovery:
     def _surface_contact(self, log: FlightLog, held: np.ndarray, dt: float) -> dict[str, np.ndarray]:
         """The samples ``log`` spent in contact with a wall or the ceiling it struck
         (:func:`discovery.surface_contact.surface_strikes`), by left-out reason ("wall contact", "ceiling contact"),
-        with a note and a limit per surface. A stretch ``held`` up (a rest, or the moments next to it) that reaches
-        into the contact is the surface holding the vehicle (friction on a wall), and counts as its contact too."""
+        with a note and a limit per surface; then with a surface the scene does not have
+        (:func:`discovery.surface_contact.undeclared_strikes`), with a note. A stretch ``held`` up (a rest, or the
+        moments next to it) that reaches into the contact is the surface holding the vehicle (friction on a wall),
+        and counts as its contact too."""
         by_reason: dict[str, np.ndarray] = {}
         edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int), [0]])))  # the held stretches' ends
+
+        def with_held(in_contact: np.ndarray) -> np.ndarray:
+            out = in_contact.copy()
+            for a, b in zip(edges[::2], edges[1::2]):
+                if out[a:b].any():
+                    out[a:b] = True
+            return out
+
         for struck in surface_strikes(log):
             kind = struck.surface.split(" ")[0]  # "wall" or "ceiling"
             pull = "suction" if kind == "wall" else "the ceiling effect"
             name = struck.surface if kind == "wall" else f"the {struck.surface}"
-            in_contact = struck.in_contact.copy()
-            for a, b in zip(edges[::2], edges[1::2]):
-                if in_contact[a:b].any():
-                    in_contact[a:b] = True
+            in_contact = with_held(struck.in_contact)
             reason = f"{kind} contact"
             by_reason[reason] = by_reason.get(reason, np.zeros(log.n_samples, dtype=bool)) | in_contact
             evidence = []
             if len(struck.times):
-                at = ", ".join(f"{t:.2f}" for t in struck.times[:MAX_TIMES_LISTED])
-                more = (f" and {len(struck.times) - MAX_TIMES_LISTED} more" if len(struck.times) > MAX_TIMES_LISTED
-                        else "")
                 evidence.append(
-                    f"struck {name} {len(struck.times)} times (t = {at}{more} s): each time pushed away from it more "
+                    f"struck {name} {_listed_times(struck.times)}: each time pushed away from it more "
                     f"than {STRIKE_Z:g} times the log's own scatter beyond what the thrust and gravity do, within "
                     f"{1e3 * STRIKE_WINDOW_S:g} ms, and within {1e3 * SAME_DISTANCE:g} mm of its closest approach")
             if struck.pressed_s > 0:
@@ -836,19 +840,14 @@ class Discovery:
         declared = np.logical_or.reduce([np.zeros(log.n_samples, dtype=bool), *by_reason.values()])
         excluded = held | declared
         for struck in undeclared_strikes(log, excluded):
-            in_contact = struck.in_contact & ~declared
-            for a, b in zip(edges[::2], edges[1::2]):
-                if in_contact[a:b].any():
-                    in_contact[a:b] = True
+            in_contact = with_held(struck.in_contact & ~declared)
             reason = UNDECLARED_CONTACT
             by_reason[reason] = by_reason.get(reason, np.zeros(log.n_samples, dtype=bool)) | in_contact
-            at = ", ".join(f"{t:.2f}" for t in struck.times[:MAX_TIMES_LISTED])
-            more = f" and {len(struck.times) - MAX_TIMES_LISTED} more" if len(struck.times) > MAX_TIMES_LISTED else ""
             normal = "(" + ", ".join(f"{c:+.2f}" for c in struck.normal) + ")"
             reach = struck.stopped_at
             self.notes_.append(
-                f"{log.source}: the vehicle struck a surface the scene does not have {len(struck.times)} times (t = "
-                f"{at}{more} s): each time pushed along {normal} (world) more than {STRIKE_Z:g} times the log's own "
+                f"{log.source}: the vehicle struck a surface the scene does not have {_listed_times(struck.times)}: "
+                f"each time pushed along {normal} (world) more than {STRIKE_Z:g} times the log's own "
                 f"scatter beyond what the thrust and gravity do, within {1e3 * STRIKE_WINDOW_S:g} ms, where its rotor "
                 f"centres went farthest against that direction (within {1e3 * SAME_DISTANCE:g} mm of {reach:.3f} m "
                 f"along it). {in_contact.sum() * dt:.1f} s there (or held there) are left out as {reason}, a force "
@@ -1086,6 +1085,13 @@ def _written_std(written: list[Effect], fitted: list[Effect], stds: list[dict]) 
 
 def _params_text(params: dict[str, Any]) -> str:
     return ", ".join(f"{k}={np.round(v, 4).tolist() if isinstance(v, list) else f'{v:.4g}'}" for k, v in params.items())
+
+
+def _listed_times(times: np.ndarray) -> str:
+    """``"3 times (t = 1.00, 2.00, 3.00 s)"``, the first :data:`MAX_TIMES_LISTED` times and how many more."""
+    at = ", ".join(f"{t:.2f}" for t in times[:MAX_TIMES_LISTED])
+    more = f" and {len(times) - MAX_TIMES_LISTED} more" if len(times) > MAX_TIMES_LISTED else ""
+    return f"{len(times)} times (t = {at}{more} s)"
 
 
 def _intervals(t: np.ndarray, mask: np.ndarray) -> list[list[float]]:
