@@ -70,6 +70,7 @@ class Case:
     says: tuple[str, ...] = ()  # phrases the report's notes or limits must hold
     long: bool = False  # a 360 s log, run with --long only
     rate: float | None = None  # a fixed rate (else the rates cycle)
+    unseen_wall: float | None = None  # a wall at x = 0 the scene does not have stops guards of this radius (m)
 
 
 def cases(seed: int) -> list[Case]:
@@ -113,6 +114,8 @@ def cases(seed: int) -> list[Case]:
              says=("ground",)),
         Case("thrust_map", {"thrust_scale": scale, "thrust_offset": offset}, OPEN,
              {"thrust_scale": {"scale": scale, "offset": offset}}, {"wall": False}),
+        Case("unseen_wall", {"quadratic_drag": (C, w_air)}, FAST, {"quadratic_drag": {"C": C, "w": w_air}},
+             {"wall": False}, unseen_wall=0.04, says=("struck a surface the scene does not have",)),
         # ---- long logs (a distance offset needs slow, close passes)
         Case("ground_offset", {"ground": (radius, 0.012)}, GROUND_CLOSE,
              {"ground_effect": {"radius": radius, "offset": 0.012}}, {"wall": False}, duration=360.0, long=True),
@@ -133,12 +136,11 @@ def _effects_for_flight(case: Case, seed: int) -> dict[str, Any]:
 
 
 @contextlib.contextmanager
-def _wall_guard_only_if(wall: bool) -> Iterator[None]:
-    """The second simulator's wall guard (``--wall-guard``) while flying a world whose scene has a wall; a world
-    without one has nothing to strike."""
+def _wall_guard(radius: float | None) -> Iterator[None]:
+    """The second simulator's wall at x = 0 stops guards of ``radius`` (None: it lets the vehicle through) while
+    flying."""
     guard = independent_sim.WALL_GUARD_RADIUS
-    if not wall:
-        independent_sim.WALL_GUARD_RADIUS = None
+    independent_sim.WALL_GUARD_RADIUS = radius
     try:
         yield
     finally:
@@ -148,7 +150,10 @@ def _wall_guard_only_if(wall: bool) -> Iterator[None]:
 def fly_case(case: Case, seed: int, rate: float, folder: Path, waypoints: float = 0.0) -> Path:
     """Fly ``case`` and write its log into ``folder``; returns the CSV path. ``waypoints``: see
     :func:`tests.independent_sim.fly` (0: the sinusoidal survey)."""
-    with _wall_guard_only_if(case.write.get("wall", True)):
+    # --wall-guard acts in worlds whose scene has a wall (a world without one has nothing to strike), and a case's
+    # unseen wall in its own world
+    guard = independent_sim.WALL_GUARD_RADIUS if case.write.get("wall", True) else case.unseen_wall
+    with _wall_guard(guard):
         rows = fly(_effects_for_flight(case, seed), duration=case.duration, rate_hz=rate, seed=seed,
                    motor_lag=case.motor_lag, takeoff=case.takeoff, waypoints=waypoints, **case.flight)
     return write(rows, folder / f"{case.name}_{seed}.csv", seed=seed, **case.write)
@@ -254,7 +259,7 @@ def run_winds(seed: int, rate: float, folder: Path, n_flights: int = 3, waypoint
     shared, flights = winds_case(seed)
     paths = []
     for i, flight in enumerate(flights[:n_flights]):
-        with _wall_guard_only_if(False):
+        with _wall_guard(None):
             rows = fly({"quadratic_drag": (shared["C"], flight["w"])}, duration=60.0, rate_hz=rate,
                        seed=seed * 10 + i, waypoints=waypoints, **FAST)
         paths.append(write(rows, folder / f"winds_{seed}_{i}.csv", seed=seed * 10 + i, wall=False))
