@@ -854,6 +854,14 @@ class Discovery:
                 "that is not aerodynamic. If it is a wall or a ceiling, add it to the scene (sidecar or --scene) "
                 f"with the normal {normal}: the rotor centres stopped {reach:.3f} m along it, so the plane lies there "
                 "less the reach of the vehicle's guards; its suction or ceiling effect can then be fitted too")
+            facing_down = float(struck.normal[2]) < -0.5
+            self._contact_limits.append({
+                "effects": ["ceiling_effect" if facing_down else "wall_suction"],
+                "reason": f"{log.source} struck a surface the scene does not have, facing {normal}: its "
+                          f"{'ceiling effect' if facing_down else 'suction'} is not fitted",
+                "manoeuvre": f"add the surface to the scene (sidecar or --scene) with the normal {normal}: the rotor "
+                             f"centres stopped {reach:.3f} m along it, and the plane lies there less the reach of the "
+                             "vehicle's guards"})
         return by_reason
 
     @staticmethod

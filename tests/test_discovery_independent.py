@@ -223,6 +223,8 @@ def test_strikes_on_a_wall_missing_from_the_scene_are_found_left_out_and_the_dra
     assert "pushed along (+1.00, +0.00, +0.00)" in note
     strikes = int(note.split("does not have ")[1].split(" times")[0])
     assert strikes >= 10  # one or two each time the survey swings to x = -0.5 m, every 5 s
+    assert any(limit["effects"] == ["wall_suction"] and "struck a surface the scene does not have" in limit["reason"]
+               for limit in found.limits_)
     assert found.names_ == ["quadratic_drag"]
     fitted = found.effects_[0].values
     assert max(relative_errors({"C": fitted["C"]}, {"C": C})) < 0.1
