@@ -35,7 +35,7 @@ _RATE_LAG = 0.03  # s, body-rate response
 REST_HEIGHT = 0.06  # m, height of the centre of mass (and the rotors) resting on the ground's landing gear
 _CONTACT_STIFFNESS = 3000.0  # N/m
 _CONTACT_DAMPING = 80.0  # N s/m
-_CONTACT_FRICTION = 20.0  # N s/m, horizontal, while in contact
+_CONTACT_FRICTION = 20.0  # N s/m, along the surface, while in contact
 #: with a number, the wall at x = 0 (below its ``wall_top`` when one is flown) stops the vehicle: each rotor's guard
 #: (this radius, m, around the rotor centre) meets it through the ground's spring, damper and friction; None (the
 #: default) lets the vehicle through it
@@ -140,13 +140,13 @@ def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, d
         force = force + effects["turbulence"](t)
     if contact:
         force = force + _pressed_surface(REST_HEIGHT - p[2], v, axis=2, away=1.0)
+    rotors_world = [p + R @ rotor for rotor in ROTORS_BODY]
     if WALL_GUARD_RADIUS is not None:
         top = effects.get("wall_top", math.inf)  # a rotor above a wall's top passes over it
-        depth = WALL_GUARD_RADIUS - min(((p + R @ rotor)[0] for rotor in ROTORS_BODY if (p + R @ rotor)[2] <= top),
-                                        default=math.inf)
+        depth = WALL_GUARD_RADIUS - min((at[0] for at in rotors_world if at[2] <= top), default=math.inf)
         force = force + _pressed_surface(depth, v, axis=0, away=1.0)
     if CEILING_GUARD_RADIUS is not None and "ceiling" in effects:
-        depth = CEILING_GUARD_RADIUS - min(CEILING_Z - (p + R @ rotor)[2] for rotor in ROTORS_BODY)
+        depth = CEILING_GUARD_RADIUS - min(CEILING_Z - at[2] for at in rotors_world)
         force = force + _pressed_surface(depth, v, axis=2, away=-1.0)
     return (v, force / MASS - np.array([0, 0, GRAVITY]), 0.5 * _qmul(q, np.array([0.0, *w])), (w_cmd - w) / _RATE_LAG,
             thrust_dot)
