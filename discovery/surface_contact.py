@@ -157,12 +157,11 @@ def _half_window(log: FlightLog) -> int:
     return max(1, int(round(STRIKE_WINDOW_S / float(np.median(np.diff(log.t))) / 2)))
 
 
-def _was_approaching(log: FlightLog, normal: np.ndarray, i: int, jolt: float, half: int) -> bool:
+def _was_approaching(log: FlightLog, normal: np.ndarray, i: int, jolt: float, half: int, dt: float) -> bool:
     """Whether the vehicle came at the surface before the jolt at sample ``i``: over the window before the jolt's
     own, its mean speed toward the surface is at least :data:`APPROACH_SHARE` of the speed the jolt took away
     (``jolt`` times its window). A glitch in the velocity estimate, or a hold's noise, jolts a vehicle that was not
-    moving."""
-    dt = float(np.median(np.diff(log.t)))
+    moving. ``dt``: the log's median period."""
     before = log.v_world[max(0, i - 3 * half):max(1, i - half), :] @ normal
     return bool(-before.mean() >= APPROACH_SHARE * jolt * 2 * half * dt)
 
@@ -226,7 +225,8 @@ def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
         return []
     rotors_world = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)
     # the jump along a normal is the jumps along the world axes projected on it (the jolt is linear in the normal)
-    pushes = np.column_stack([jolt_jump(outward_jolt(log, axis), _half_window(log)) for axis in np.eye(3)])
+    half = _half_window(log)
+    pushes = np.column_stack([jolt_jump(outward_jolt(log, axis), half) for axis in np.eye(3)])
     angles = 2.0 * np.pi * np.arange(UNDECLARED_DIRECTIONS) / UNDECLARED_DIRECTIONS
     normals = [np.array([np.cos(a), np.sin(a), 0.0]) for a in angles] + [np.array([0.0, 0.0, -1.0])]
     found = []
@@ -283,7 +283,7 @@ def _strikes_on(log: FlightLog, surface: str, effect: str | None, normal: np.nda
     scatter = max(SCATTER_FLOOR, 1.4826 * float(np.median(np.abs(jolt[finite] - centre))))
     hits = np.flatnonzero(finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter)
                           & (distance < closest + SAME_DISTANCE) & candidates)
-    hits = hits[[_was_approaching(log, normal, int(i), float(jolt[i]), half) for i in hits]]
+    hits = hits[[_was_approaching(log, normal, int(i), float(jolt[i]), half, dt) for i in hits]]
     strikes: list[list[int]] = []
     for i in hits:
         if strikes and log.t[i] - log.t[strikes[-1][-1]] <= STRIKE_SEPARATION_S:

@@ -845,23 +845,22 @@ class Discovery:
             by_reason[reason] = by_reason.get(reason, np.zeros(log.n_samples, dtype=bool)) | in_contact
             normal = "(" + ", ".join(f"{c:+.2f}" for c in struck.normal) + ")"
             reach = struck.stopped_at
+            place = (f"with the normal {normal}: the rotor centres stopped {reach:.3f} m along it, so the plane lies "
+                     "there less the reach of the vehicle's guards")
             self.notes_.append(
                 f"{log.source}: the vehicle struck a surface the scene does not have {_listed_times(struck.times)}: "
                 f"each time pushed along {normal} (world) more than {STRIKE_Z:g} times the log's own "
                 f"scatter beyond what the thrust and gravity do, within {1e3 * STRIKE_WINDOW_S:g} ms, where its rotor "
                 f"centres went farthest against that direction (within {1e3 * SAME_DISTANCE:g} mm of {reach:.3f} m "
                 f"along it). {in_contact.sum() * dt:.1f} s there (or held there) are left out as {reason}, a force "
-                "that is not aerodynamic. If it is a wall or a ceiling, add it to the scene (sidecar or --scene) "
-                f"with the normal {normal}: the rotor centres stopped {reach:.3f} m along it, so the plane lies there "
-                "less the reach of the vehicle's guards; its suction or ceiling effect can then be fitted too")
+                f"that is not aerodynamic. If it is a wall or a ceiling, add it to the scene (sidecar or --scene) "
+                f"{place}; its suction or ceiling effect can then be fitted too")
             facing_down = float(struck.normal[2]) < -0.5
             self._contact_limits.append({
                 "effects": ["ceiling_effect" if facing_down else "wall_suction"],
                 "reason": f"{log.source} struck a surface the scene does not have, facing {normal}: its "
                           f"{'ceiling effect' if facing_down else 'suction'} is not fitted",
-                "manoeuvre": f"add the surface to the scene (sidecar or --scene) with the normal {normal}: the rotor "
-                             f"centres stopped {reach:.3f} m along it, and the plane lies there less the reach of the "
-                             "vehicle's guards"})
+                "manoeuvre": f"add the surface to the scene (sidecar or --scene) {place}"})
         return by_reason
 
     @staticmethod
