@@ -5,6 +5,8 @@ Run as a user would: each log is written as CSV and sidecar, then ``wall-inspect
     python -m tests.independent_cases --seeds 201,202 --json indep.json      # every class, three rates
     python -m tests.independent_cases --seeds 201 --cases gust,finite_wall   # some of them
     python -m tests.independent_cases --seeds 201 --long                     # with the 360 s offset logs
+    python -m tests.independent_cases --seeds 201 --turn 35 --shift 1.5,-2   # logged in a turned, shifted frame
+    python -m tests.independent_cases --seeds 201 --rotor-radius 0.17 --plus # another vehicle's rotor layout
 
 Each case says which effects are flown (in the library's terms where the library has them), whether a
 residual the library cannot describe is left (and where it lives), and what else the report must say (a
@@ -50,7 +52,11 @@ CEILING_CLOSE = {"centre": (1.5, 0.0, CEILING_Z - 0.105), "amplitude": (0.6, 0.6
 TALL_WALL = {"centre": (0.25, 0.0, 1.2), "amplitude": (0.09, 0.5, 0.45), "period": (7.0, 9.0, 5.0), "gains": NEAR_WALL}
 TALL = {"centre": (1.5, 0.0, 1.2), "amplitude": (1.0, 1.0, 0.5), "period": (5.0, 6.0, 6.0)}
 RATES = (100.0, 50.0, 200.0)
+_REACH = -float(independent_sim.ROTORS_BODY[:, 0].min())  # m: the default layout's rotors' reach toward the wall
 WEIGHT = MASS * GRAVITY
+#: parameters in the world's frame: turned back from the log's frame to be judged (the drags' coefficients are in
+#: body axes)
+WORLD_FRAME_PARAMETERS = {("constant_force", "F"), ("quadratic_drag", "w")}
 UNEXPLAINED_SHARE = 0.03  # of the weight: a log leaving more must say so, with where it lives
 
 
@@ -152,10 +158,15 @@ def fly_case(case: Case, seed: int, rate: float, folder: Path, waypoints: float 
     :func:`tests.independent_sim.fly` (0: the sinusoidal survey)."""
     # --wall-guard acts in worlds whose scene has a wall (a world without one has nothing to strike), and a case's
     # unseen wall in its own world
-    guard = independent_sim.WALL_GUARD_RADIUS if case.write.get("wall", True) else case.unseen_wall
+    walled = case.write.get("wall", True)
+    guard = independent_sim.WALL_GUARD_RADIUS if walled else case.unseen_wall
+    flight = dict(case.flight)
+    if walled:  # the same distances from the wall for the rotor nearest it, whatever the rotor layout
+        reach = -float(independent_sim.ROTORS_BODY[:, 0].min())
+        flight["centre"] = (flight["centre"][0] + reach - _REACH, *flight["centre"][1:])
     with _wall_guard(guard):
         rows = fly(_effects_for_flight(case, seed), duration=case.duration, rate_hz=rate, seed=seed,
-                   motor_lag=case.motor_lag, takeoff=case.takeoff, waypoints=waypoints, **case.flight)
+                   motor_lag=case.motor_lag, takeoff=case.takeoff, waypoints=waypoints, **flight)
     return write(rows, folder / f"{case.name}_{seed}.csv", seed=seed, **case.write)
 
 
@@ -195,6 +206,8 @@ def judge(case: Case, report: dict) -> dict:
         effect = named.get(name)
         for key, value in truth.items():
             fitted = None if effect is None else effect["params"].get(key)
+            if fitted is not None and (name, key) in WORLD_FRAME_PARAMETERS:
+                fitted = independent_sim.from_log_world(fitted)
             errors[f"{name}.{key}"] = None if fitted is None else relative_error(fitted, value)
     lag = report.get("motor_lag") or {}
     if case.motor_lag:
@@ -274,8 +287,8 @@ def run_winds(seed: int, rate: float, folder: Path, n_flights: int = 3, waypoint
         for flight, record in zip(flights, per_flight):
             fitted = (record.get("quadratic_drag") or {}).get("w")
             true = np.asarray(flight["w"])
-            wind_errors.append(None if fitted is None else float(np.linalg.norm(np.asarray(fitted) - true)
-                                                                  / np.linalg.norm(true)))
+            off = None if fitted is None else independent_sim.from_log_world(fitted) - true
+            wind_errors.append(None if off is None else float(np.linalg.norm(off) / np.linalg.norm(true)))
         out["wind_errors"] = wind_errors
     held = (report.get("flights") or {}).get("held_out") or []
     out["held_out_ratio"] = [h.get("ratio_to_in_sample") for h in held]
@@ -304,6 +317,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ceiling-guard", type=float, default=None,
                         help="the ceiling stops each rotor's guard of this radius, m (default: the vehicle passes "
                              "through)")
+    parser.add_argument("--turn", type=float, default=0.0,
+                        help="write each log in a frame turned by this many degrees about z (the flight is the same)")
+    parser.add_argument("--shift", default="0,0", help="and shifted by this x,y (m)")
+    parser.add_argument("--rotor-radius", type=float, default=None,
+                        help="the rotors' distance from the centre, m (default 0.125)")
+    parser.add_argument("--plus", action="store_true", help="rotors on the body axes (default: on the diagonals)")
+    parser.add_argument("--noise", type=float, default=1.0, help="measurement noise times this (default 1)")
     args = parser.parse_args(argv)
     if not 0.25 < args.gain_floor < 5.0:  # at a quarter of the radius the image-rotor gain is infinite
         parser.error(f"--gain-floor must be in (0.25, 5) radii, got {args.gain_floor}")
@@ -313,7 +333,19 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--wall-guard must be in (0, 0.3) m, got {args.wall_guard}")
     if args.ceiling_guard is not None and not 0.0 < args.ceiling_guard < 0.3:
         parser.error(f"--ceiling-guard must be in (0, 0.3) m, got {args.ceiling_guard}")
+    if args.rotor_radius is not None and not 0.05 <= args.rotor_radius <= 0.5:
+        parser.error(f"--rotor-radius must be in [0.05, 0.5] m, got {args.rotor_radius}")
+    if not 0.0 <= args.noise <= 20.0:
+        parser.error(f"--noise must be in [0, 20], got {args.noise}")
+    shift = tuple(float(x) for x in args.shift.split(","))
+    if len(shift) != 2:
+        parser.error(f"--shift must be two numbers x,y, got {args.shift!r}")
     global WEIGHT
+    independent_sim.WORLD_TURN, independent_sim.WORLD_SHIFT = math.radians(args.turn), shift
+    independent_sim.NOISE_SCALE = args.noise
+    if args.rotor_radius is not None or args.plus:
+        radius = args.rotor_radius if args.rotor_radius is not None else 0.125
+        independent_sim.ROTORS_BODY = independent_sim.rotor_layout(radius, args.plus)
     independent_sim.GAIN_FLOOR_RADII = args.gain_floor
     independent_sim.MASS, WEIGHT = args.mass, args.mass * GRAVITY
     independent_sim.WALL_GUARD_RADIUS = args.wall_guard

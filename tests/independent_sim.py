@@ -30,6 +30,15 @@ GRAVITY = 9.81
 MASS = 1.3
 _ARM = 0.125 / math.sqrt(2.0)
 ROTORS_BODY = np.array([[_ARM, -_ARM, 0.0], [-_ARM, _ARM, 0.0], [_ARM, _ARM, 0.0], [-_ARM, -_ARM, 0.0]])
+
+
+def rotor_layout(radius: float, plus: bool = False) -> np.ndarray:
+    """Four rotor centres (body frame, m) ``radius`` from the centre: on the diagonals (an x layout) or, with
+    ``plus``, on the body axes."""
+    if plus:
+        return np.array([[radius, 0.0, 0.0], [-radius, 0.0, 0.0], [0.0, radius, 0.0], [0.0, -radius, 0.0]])
+    arm = radius / math.sqrt(2.0)
+    return np.array([[arm, -arm, 0.0], [-arm, arm, 0.0], [arm, arm, 0.0], [-arm, -arm, 0.0]])
 _DT = 0.002  # s, integration step
 _RATE_LAG = 0.03  # s, body-rate response
 REST_HEIGHT = 0.06  # m, height of the centre of mass (and the rotors) resting on the ground's landing gear
@@ -45,6 +54,14 @@ CEILING_GUARD_RADIUS: float | None = None
 CEILING_Z = 2.0  # m, the ceiling's height when a ceiling effect is flown
 #: radii (distance plus offset) at which the image-rotor gain levels off; the library's form levels off at 0.5
 GAIN_FLOOR_RADII = 0.6
+#: the frame the log and its sidecar are written in: the simulator's world turned by WORLD_TURN (rad) about z, then
+#: shifted by WORLD_SHIFT (x, y; m); the flight is the same, only its description moves (the wall's point and normal,
+#: a world-frame wind, the vehicle's heading)
+WORLD_TURN = 0.0
+WORLD_SHIFT = (0.0, 0.0)
+#: the measurement noise's standard deviations (position 1 mm, velocity 1 cm/s, attitude 1 mrad, rates 5 mrad/s)
+#: times this
+NOISE_SCALE = 1.0
 #: position-loop gains that beat wall suction's pull (its negative stiffness, 2 k_s for two near rotors, reaches
 #: 14 N/m at k_s = 7 N/m; the default loop's 1.3 kg x 6 /s^2 = 7.8 N/m let the vehicle through the wall, which this
 #: simulator does not stop)
@@ -63,6 +80,16 @@ def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     w2, x2, y2, z2 = b
     return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
                      w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def _turn() -> np.ndarray:
+    c, s = math.cos(WORLD_TURN), math.sin(WORLD_TURN)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def from_log_world(vector) -> np.ndarray:
+    """A world-frame vector of the log's frame (a fitted wind, a steady force) in the simulator's frame."""
+    return _turn().T @ np.asarray(vector, dtype=float)
 
 
 def _image_gain(radius: float, distance: float, offset: float) -> float:
@@ -280,16 +307,20 @@ def write(rows: list[tuple], path: Path, seed: int, wall: bool = True, *, wall_n
 
     The sidecar's wall is the plane x = 0 with normal ``(wall_normal, 0, 0)`` (+1 is right: the normal points
     away from the wall, into the flown space; -1 points into the wall, a sidecar error); the ground is z = 0 and
-    the ceiling, with ``ceiling``, z = :data:`CEILING_Z`."""
+    the ceiling, with ``ceiling``, z = :data:`CEILING_Z`; all in the simulator's frame, written turned and shifted
+    by :data:`WORLD_TURN` and :data:`WORLD_SHIFT`."""
     rng = np.random.default_rng(seed + 1)
+    turn, shift = _turn(), np.array([*WORLD_SHIFT, 0.0])
+    q_turn = np.array([math.cos(WORLD_TURN / 2), 0.0, 0.0, math.sin(WORLD_TURN / 2)])
     lines = ["t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz,thrust_cmd,wx_cmd,wy_cmd,wz_cmd"]
     for t, p, v, q, w, thrust, w_cmd in rows:
-        q = _qmul(q, np.array([1.0, *rng.normal(0.0, 0.001, 3)]))
-        values = [t, *(p + rng.normal(0.0, 0.001, 3)), *(v + rng.normal(0.0, 0.01, 3)), *(q / np.linalg.norm(q)),
-                  *(w + rng.normal(0.0, 0.005, 3)), thrust, *w_cmd]
+        p, v, q = turn @ p + shift, turn @ v, _qmul(q_turn, q)
+        q = _qmul(q, np.array([1.0, *rng.normal(0.0, 0.001 * NOISE_SCALE, 3)]))
+        values = [t, *(p + rng.normal(0.0, 0.001 * NOISE_SCALE, 3)), *(v + rng.normal(0.0, 0.01 * NOISE_SCALE, 3)),
+                  *(q / np.linalg.norm(q)), *(w + rng.normal(0.0, 0.005 * NOISE_SCALE, 3)), thrust, *w_cmd]
         lines.append(",".join(f"{x:.9g}" for x in values))
     path.write_text("\n".join(lines) + "\n")
-    walls = [{"point": [0.0, 0.0, 0.0], "normal": [wall_normal, 0.0, 0.0]}] if wall else []
+    walls = [{"point": shift.tolist(), "normal": (turn @ [wall_normal, 0.0, 0.0]).tolist()}] if wall else []
     sidecar = {"vehicle": {"mass": MASS, "rotor_positions": ROTORS_BODY.tolist()},
                "scene": {"walls": walls, "ground_z": 0.0, "ceiling_z": CEILING_Z if ceiling else None},
                "gravity": GRAVITY}
