@@ -21,7 +21,8 @@ design, and :mod:`discovery.coverage` leaves the ground's rests and touchdowns o
 A surface the scene does not have (a wall missing from the sidecar, a net, an obstacle) is found by
 :func:`undeclared_strikes`: the same strikes against a plane where the rotor centres went farthest,
 for a ring of horizontal normals and one facing down; the normal nearest the strikes' own push is
-the surface's. Nothing near it is fitted, so its contact is taken generously: from where each
+the surface's, turned to the plane through the points where the strikes stopped the rotor centres
+when they span it. Nothing near it is fitted, so its contact is taken generously: from where each
 strike's push began.
 
 Without an accelerometer column the jolt is read from the logged velocity; a velocity estimate
@@ -53,6 +54,7 @@ it there after the first strike (a 2.5 cm guard on a light vehicle), so it never
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -63,7 +65,7 @@ from discovery.flight_log import FlightLog
 from discovery.regressors import rotor_centres_world, surface_clearances
 
 __all__ = ["Strikes", "surface_strikes", "undeclared_strikes", "outward_jolt", "jolt_jump", "pressed_against",
-           "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES", "SAME_DISTANCE", "CONTACT_MARGIN", "UNDECLARED_CONTACT",
+           "normal_text", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES", "SAME_DISTANCE", "CONTACT_MARGIN", "UNDECLARED_CONTACT",
            "UNDECLARED_DIRECTIONS"]
 
 STRIKE_WINDOW_S = 0.03  # s: a guard stops the vehicle in about this long; the loop's braking takes hundreds of ms
@@ -81,6 +83,11 @@ ONSET_Z = 2.0  # robust standard deviations: a strike's push began where its jum
 UNDECLARED_CONTACT = "contact with a surface not in the scene"  # the reason its samples are left out
 UNDECLARED_DIRECTIONS = 36  # horizontal normals tried for a surface the scene does not have (10 degrees apart)
 UNDECLARED_APART_DEG = 45.0  # degrees: normals nearer than this to one taken are the same undeclared surface
+#: m: an undeclared surface whose strikes stopped the rotor centres at points this far apart along it is turned to
+#: the vertical plane through those points (the ring's normals are 10 degrees apart; 5 degrees off, the plane through
+#: one end of a 4 m survey lies 35 cm from its other end, where the strikes then go unseen)
+TURN_TO_POINTS_SPAN = 0.3
+TURN_TO_POINTS_MAX_DEG = 10.0  # the plane through the points is taken only this near the ring's normal
 
 
 @dataclass(frozen=True)
@@ -229,18 +236,22 @@ def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
     pushes = np.column_stack([jolt_jump(outward_jolt(log, axis), half) for axis in np.eye(3)])
     angles = 2.0 * np.pi * np.arange(UNDECLARED_DIRECTIONS) / UNDECLARED_DIRECTIONS
     normals = [np.array([np.cos(a), np.sin(a), 0.0]) for a in angles] + [np.array([0.0, 0.0, -1.0])]
-    found = []
-    for normal in normals:
+
+    def facing(normal: np.ndarray) -> Strikes | None:
         along = (rotors_world @ normal).min(axis=1)
         stopped_at = float(along[~excluded].min())
-        name = "a surface not in the scene, facing " + ", ".join(f"{c:+.2f}" for c in normal)
+        name = "a surface not in the scene, facing " + normal_text(normal)
         struck = _strikes_on(log, name, None, normal, along - stopped_at, 0.0, pushes @ normal, candidates=~excluded,
                              pressed=False, from_onset=True)
+        return None if struck is None else replace(struck, stopped_at=stopped_at)
+
+    found = []
+    for normal in normals:
+        struck = facing(normal)
         if struck is None:
             continue
         push = np.nanmean(pushes[np.searchsorted(log.t, struck.times)], axis=0)
-        found.append((float(normal @ push) / max(float(np.linalg.norm(push)), 1e-12),
-                      replace(struck, stopped_at=stopped_at)))
+        found.append((float(normal @ push) / max(float(np.linalg.norm(push)), 1e-12), struck))
     out: list[Strikes] = []
     for _, struck in sorted(found, key=lambda f: -f[0]):
         taken = np.concatenate([np.zeros(0), *(other.times for other in out)])
@@ -252,8 +263,60 @@ def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
             out[same[0]] = replace(other, times=np.sort(np.concatenate([other.times, own])),
                                    in_contact=other.in_contact | struck.in_contact)
         elif not same and (not out or own.size >= MIN_STRIKES):
-            out.append(struck)
+            near = [other.times for _, other in found
+                    if float(struck.normal @ other.normal) >= np.cos(np.radians(UNDECLARED_APART_DEG))]
+            out.append(_turned_to_points(log, rotors_world, struck, _separate(np.concatenate(near)), facing))
     return out
+
+
+def _turned_to_points(log: FlightLog, rotors_world: np.ndarray, struck: Strikes, times: np.ndarray,
+                      facing: Callable[[np.ndarray], Strikes | None]) -> Strikes:
+    """``struck`` (an undeclared wall, its normal one of the ring's) turned to the vertical plane through the points
+    where strikes stopped the rotor centres, and struck again (``facing``: the strikes for a normal). The strikes at
+    ``times`` are those of every ring normal near this one: each ring plane meets the flight somewhere else along
+    the wall, so together they span it. Each strike's point is its nearest rotor centre at its farthest against the
+    normal, within the strike's window; the plane through the points (least squares across it) gives a normal, the
+    points are taken again against that, until it turns by less than 0.1 degrees. Kept as it is when the points
+    span less than :data:`TURN_TO_POINTS_SPAN` along it, when the plane through them is more than
+    :data:`TURN_TO_POINTS_MAX_DEG` off, when the turned plane is struck fewer times, or when it faces down (a
+    ceiling)."""
+    if abs(struck.normal[2]) > 1e-9 or times.size < 2:
+        return struck
+    pad = max(1, int(round(STRIKE_WINDOW_S / float(np.median(np.diff(log.t))))))
+    windows = [rotors_world[max(0, i - pad):i + pad + 1] for i in np.searchsorted(log.t, times)]
+    ring = normal = struck.normal
+    for _ in range(10):
+        points = np.array([window[np.unravel_index(np.argmin(window @ normal), window.shape[:2])][:2]
+                           for window in windows])
+        xy = points - points.mean(axis=0)
+        along_wall = np.linalg.svd(xy, full_matrices=False)[2][0]
+        if np.ptp(xy @ along_wall) < TURN_TO_POINTS_SPAN:
+            return struck
+        turned = np.array([-along_wall[1], along_wall[0], 0.0])
+        turned *= np.sign(turned @ ring)
+        if turned @ ring < np.cos(np.radians(TURN_TO_POINTS_MAX_DEG)):
+            return struck
+        settled = turned @ normal > np.cos(np.radians(0.1))
+        normal = turned
+        if settled:
+            break
+    again = facing(normal)
+    return again if again is not None and again.times.size >= struck.times.size else struck
+
+
+def normal_text(normal: np.ndarray) -> str:
+    """A unit normal as the notes give it: ``(+0.819, +0.574, +0.000)``."""
+    return "(" + ", ".join(f"{round(float(c), 3) + 0.0:+.3f}" for c in normal) + ")"
+
+
+def _separate(times: np.ndarray) -> np.ndarray:
+    """``times`` sorted, each within :data:`STRIKE_SEPARATION_S` of the one kept before it dropped (one strike found
+    on several planes)."""
+    kept: list[float] = []
+    for time in np.sort(times):
+        if not kept or time - kept[-1] > STRIKE_SEPARATION_S:
+            kept.append(float(time))
+    return np.array(kept)
 
 
 def _onset(jump: np.ndarray, level: float, first: int, half: int) -> np.ndarray:

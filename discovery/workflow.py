@@ -98,6 +98,7 @@ from discovery.surface_contact import (
     STRIKE_WINDOW_S,
     STRIKE_Z,
     UNDECLARED_CONTACT,
+    normal_text,
     surface_strikes,
     undeclared_strikes,
 )
@@ -843,7 +844,7 @@ class Discovery:
             in_contact = with_held(struck.in_contact & ~declared)
             reason = UNDECLARED_CONTACT
             by_reason[reason] = by_reason.get(reason, np.zeros(log.n_samples, dtype=bool)) | in_contact
-            normal = "(" + ", ".join(f"{c:+.2f}" for c in struck.normal) + ")"
+            normal = normal_text(struck.normal)
             reach = struck.stopped_at
             place = (f"with the normal {normal}: the rotor centres stopped {reach:.3f} m along it, so the plane lies "
                      "there less the reach of the vehicle's guards")

@@ -220,7 +220,7 @@ def test_strikes_on_a_wall_missing_from_the_scene_are_found_left_out_and_the_dra
     found = _discover(write(rows, tmp_path / "unseen_wall.csv", seed=7861, wall=False))
     assert {x["reason"] for x in found.left_out_} == {UNDECLARED_CONTACT}
     note = next(n for n in found.notes_ if "struck a surface the scene does not have" in n)
-    assert "pushed along (+1.00, +0.00, +0.00)" in note
+    assert "pushed along (+1.000, +0.000, +0.000)" in note
     strikes = int(note.split("does not have ")[1].split(" times")[0])
     assert strikes >= 10  # one or two each time the survey swings to x = -0.5 m, every 5 s
     assert any(limit["effects"] == ["wall_suction"] and "struck a surface the scene does not have" in limit["reason"]

@@ -12,6 +12,7 @@ from discovery.surface_contact import (
     SAME_DISTANCE,
     STRIKE_WINDOW_S,
     jolt_jump,
+    normal_text,
     outward_jolt,
     pressed_against,
     surface_strikes,
@@ -31,15 +32,17 @@ CEILING_Z = 2.0  # m
 
 
 def _survey(depth: float, seed: int = 0, *, velocity_lag_s: float = 0.0, velocity_noise: float = VELOCITY_NOISE,
-            accelerometer: bool = False, ceiling: bool = False) -> tuple[FlightLog, np.ndarray]:
+            accelerometer: bool = False, ceiling: bool = False, along_wall: float = 0.0) -> tuple[FlightLog, np.ndarray]:
     """A vehicle flying toward and away from a wall at x = 0 (normal +x): its loop (a PD on position, the thrust
     tilted to give the acceleration it asks) steers a sinusoid whose turning point lies ``depth`` past where the
     wall stops it (negative: short of it). Where the vehicle would pass the stop, the wall stops it dead and holds
     it while the loop pushes on toward the wall; it leaves once the loop pulls it away. The logged velocity is the
     true one filtered over ``velocity_lag_s`` (first order), with noise; with ``accelerometer`` the log has the
     acceleration too (0.1 m/s^2 noise). With ``ceiling`` the same up and down under a ceiling at z = CEILING_Z
-    (normal -z), level, the thrust carrying the weight and the loop's acceleration. Returns the log and the samples
-    the surface held."""
+    (normal -z), level, the thrust carrying the weight and the loop's acceleration. ``along_wall`` (m): the vehicle also
+    swings along the wall (y) by this much either side, at half the survey's frequency, so that the strikes fall at
+    one end and the other in turn (rolled to give that acceleration too). Returns the log and the samples the surface
+    held."""
     vehicle = NominalVehicle.from_vehicle_params(VehicleParams(mass=MASS))
     # x: the distance coordinate (the wall's x; under the ceiling, the rotors' depth below it)
     rotor_x = vehicle.rotor_positions_array[:, 0] if not ceiling else np.zeros(4)  # tilted, a rotor sits at x cos
@@ -49,6 +52,8 @@ def _survey(depth: float, seed: int = 0, *, velocity_lag_s: float = 0.0, velocit
     x_ref = x_stop - depth + AMPLITUDE * (1 + np.cos(omega * t))  # from the far end, turning at 2, 6, ... s
     v_ref = -AMPLITUDE * omega * np.sin(omega * t)
     a_ref = -AMPLITUDE * omega ** 2 * np.cos(omega * t)
+    swing = omega / 2 * (t - PERIOD_S / 2)  # at the ends of the wall at every turning point: 2, 6, ... s
+    y, v_y, a_y = (along_wall * f for f in (np.cos(swing), -omega / 2 * np.sin(swing), -(omega / 2) ** 2 * np.cos(swing)))
     x, v, a = np.zeros(len(t)), np.zeros(len(t)), np.zeros(len(t))
     held = np.zeros(len(t), dtype=bool)
     x[0], v[0] = x_ref[0], v_ref[0]
@@ -56,7 +61,7 @@ def _survey(depth: float, seed: int = 0, *, velocity_lag_s: float = 0.0, velocit
         a[k] = a_ref[k] + 4.0 * (x_ref[k] - x[k]) + 4.0 * (v_ref[k] - v[k])
         if k + 1 < len(t):
             v[k + 1], x[k + 1] = v[k] + a[k] * dt, x[k] + (v[k] + 0.5 * a[k] * dt) * dt
-            stop = STOP - float((rotor_x * np.cos(np.arctan2(a[k], G))).min())  # the nearest rotor at STOP
+            stop = STOP - float(_rotor_x(vehicle.rotor_positions_array, a[k], a_y[k]).min()) if not ceiling else STOP
             if x[k + 1] < stop:  # the wall: stopped dead (a strike), held while the loop pushes toward it
                 x[k + 1], v[k + 1], held[k + 1] = stop, 0.0, True
     rng = np.random.default_rng(seed)
@@ -73,16 +78,34 @@ def _survey(depth: float, seed: int = 0, *, velocity_lag_s: float = 0.0, velocit
         along = np.array([0.0, 0.0, -1.0])
         scene = Scene((), 0.0, CEILING_Z)
     else:
-        tilt = np.arctan2(a, G)  # about body y: the thrust's x share gives a, its z share the weight
-        q = np.column_stack([np.cos(tilt / 2), np.zeros_like(t), np.sin(tilt / 2), np.zeros_like(t)])
-        thrust = MASS * np.hypot(G, a)
-        p_world = np.column_stack([x, np.zeros(n), np.full(n, 1.0)])
+        # tilted so the thrust's horizontal share gives (a, a_y) and its vertical share the weight
+        angle, axis = _tilt(a, a_y)
+        q = np.column_stack([np.cos(angle / 2), *(np.sin(angle / 2) * axis.T)])
+        thrust = MASS * np.sqrt(a**2 + a_y**2 + G**2)
+        p_world = np.column_stack([x, y, np.full(n, 1.0)])
         along = np.array([1.0, 0.0, 0.0])
         scene = Scene((Wall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)),), 0.0, None)
-    log = FlightLog(t=t, p_world=p_world, v_world=v_measured[:, None] * along, q_body_to_world=q,
+    swinging = np.column_stack([np.zeros(n), np.zeros(n) if ceiling else v_y, np.zeros(n)])
+    log = FlightLog(t=t, p_world=p_world, v_world=v_measured[:, None] * along + swinging, q_body_to_world=q,
                     omega_body=np.zeros((n, 3)), thrust_cmd=thrust, omega_cmd_body=np.zeros((n, 3)), vehicle=vehicle,
                     scene=scene, gravity=G, a_world=a_measured[:, None] * along if accelerometer else None)
     return log, held
+
+
+def _tilt(a_x, a_y) -> tuple[np.ndarray, np.ndarray]:
+    """The angle (rad) and unit axis (horizontal, (n, 3)) that turn the body's z axis to the thrust giving horizontal
+    acceleration (a_x, a_y) and carrying the weight."""
+    a_x, a_y = np.atleast_1d(a_x), np.atleast_1d(a_y)
+    angle = np.arctan2(np.hypot(a_x, a_y), G)
+    norm = np.maximum(np.hypot(a_x, a_y), 1e-300)
+    return angle, np.column_stack([-a_y / norm, a_x / norm, np.zeros_like(a_x)])
+
+
+def _rotor_x(rotors_body: np.ndarray, a_x: float, a_y: float) -> np.ndarray:
+    """Each rotor centre's world x offset from the centre of mass, tilted by :func:`_tilt` (Rodrigues' formula)."""
+    angle, axis = _tilt(a_x, a_y)
+    (c,), (kx, ky, _) = np.cos(angle), axis[0]
+    return (c + (1 - c) * kx**2) * rotors_body[:, 0] + (1 - c) * kx * ky * rotors_body[:, 1]
 
 
 def test_the_outward_jolt_is_the_velocitys_change_beyond_the_thrusts():
@@ -222,17 +245,19 @@ def _turned(log: FlightLog, yaw: float, scene: Scene) -> FlightLog:
 
 
 def test_strikes_on_a_wall_the_scene_does_not_have_name_its_normal_and_where_the_vehicle_stopped():
-    """The same five strikes with the wall missing from the scene, and the world turned 35 degrees about z: the wall's
-    normal is (cos 35, sin 35, 0). No declared surface is struck; the undeclared one is found along the tried normal
-    nearest it (10 degrees apart), where the rotor centres stopped, and every sample the wall held is in contact. A
-    survey that turns back short of the wall strikes nothing."""
-    yaw = np.radians(35.0)
+    """The same five strikes with the wall missing from the scene, and the world turned 35.4 degrees about z: the
+    wall's normal is (cos 35.4, sin 35.4, 0). No declared surface is struck. The five strikes fall at one place on
+    the wall, so the undeclared wall is found along the tried normal nearest it (10 degrees apart), where the rotor
+    centres stopped, and every sample the wall held is in contact. A survey that turns back short of the wall
+    strikes nothing."""
+    yaw = np.radians(35.4)
     log, held = _survey(depth=0.005)
     turned = _turned(log, yaw, Scene((), 0.0, None))
     assert surface_strikes(turned) == []
     (struck,) = undeclared_strikes(turned, np.zeros(turned.n_samples, dtype=bool))
     assert struck.effect is None and len(struck.times) == 5
     assert np.degrees(np.arccos(struck.normal @ [np.cos(yaw), np.sin(yaw), 0.0])) <= 5.0 + 1e-9
+    assert min(abs(np.degrees(np.arctan2(struck.normal[1], struck.normal[0])) - a) for a in (30.0, 40.0)) < 1e-9
     rotors = turned.p_world[:, None, :] + np.einsum("nij,rj->nri", turned.R_body_to_world,
                                                     turned.vehicle.rotor_positions_array)
     assert struck.stopped_at == pytest.approx((rotors @ struck.normal).min(), abs=1e-12)
@@ -242,6 +267,20 @@ def test_strikes_on_a_wall_the_scene_does_not_have_name_its_normal_and_where_the
     short, held = _survey(depth=-0.001)
     assert not held.any() and undeclared_strikes(_turned(short, yaw, Scene((), 0.0, None)),
                                                  np.zeros(short.n_samples, dtype=bool)) == []
+
+
+def test_an_undeclared_wall_struck_along_its_length_is_turned_to_the_plane_through_the_strikes():
+    """The same survey drifting 2 m along the wall, turned 35.4 degrees: each tried normal's plane (10 degrees apart)
+    meets the flight at one end, where it strikes only some of the five times. The points where the strikes
+    stopped the rotor centres span the wall, and the plane through them is the wall's: its normal within 0.2
+    degrees, and all five strikes on it."""
+    yaw = np.radians(35.4)
+    log, held = _survey(depth=0.005, along_wall=1.0)
+    turned = _turned(log, yaw, Scene((), 0.0, None))
+    (struck,) = undeclared_strikes(turned, np.zeros(turned.n_samples, dtype=bool))
+    assert np.degrees(np.arccos(min(1.0, struck.normal @ [np.cos(yaw), np.sin(yaw), 0.0]))) < 0.2
+    assert len(struck.times) == 5 and struck.in_contact[held].all()
+    assert normal_text(struck.normal) == "(+0.815, +0.579, +0.000)"
 
 
 def test_strikes_on_a_ceiling_the_scene_does_not_have_face_down():
