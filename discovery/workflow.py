@@ -581,10 +581,11 @@ class Discovery:
             found: list[dict] = []
             for i, key in enumerate(final.names):
                 others = [k for k in final.names if k != key]
-                without = fitter.candidate(others, previous=final.previous(),
-                                           hold={k: v for k, v in self._hold.items() if k in others})
+                # the others as they are fitted without it: an entry held only because this effect stood beside
+                # it (a vertical steady force a thrust scale left undetermined) is free again
+                without, others_hold, _ = refit_determined(fitter, fitter.candidate(others, previous=final.previous()))
                 residual = data.concat(without.problem.out_of_fold(without.fit.fold_theta, r_nom)) \
-                    if without.problem is not None and others else data.concat(r_nom)
+                    if without.problem is not None and without.names else data.concat(r_nom)
                 if not is_unexplained(_rms(residual), self.noise_, data.weight, MIN_WEIGHT_SHARE):
                     continue
                 where = where_it_lives(data, residual, self.regressors_, self.noise_, self.unexplained_threshold)
@@ -595,7 +596,8 @@ class Discovery:
                     continue
                 self._say(f"asking whether {key} only stands in for a residual that {where['lives_in']} describes")
                 standin, proxies = test_effect(fitter, final, i, structures, where,
-                                               parameter_price(data.effective_samples()), self._hold)
+                                               parameter_price(data.effective_samples()), self._hold,
+                                               (list(without.names), others_hold))
                 if standin is not None:
                     found.append(standin)
                 for proxy in proxies:
@@ -611,7 +613,8 @@ class Discovery:
             changed = True
             dropped = {s["key"] for s in found}
             keys = [k for k in final.names if k not in dropped]
-            rest, rest_hold, undetermined = self._refit_kept(fitter, keys, final.previous())
+            # fitted afresh: an entry held only because a stand-in stood beside it is free again
+            rest, rest_hold, undetermined = self._refit_kept(fitter, keys, final.previous(), inherited=False)
             left_out = [k for k in keys if k not in rest.names]
             if left_out:
                 # the rest fitted without the stand-ins leaves the flight undetermined (a thrust map pinned at its
@@ -628,7 +631,8 @@ class Discovery:
                 self.stand_ins_ += found
                 self._say(f"not written as physics (stand-ins): {', '.join(sorted(dropped))}")
                 final, self._hold = rest, rest_hold
-                self.undetermined_ += undetermined
+                kept = {fitter.templates[k].name for k in keys}  # their entries were asked again
+                self.undetermined_ = [c for c in self.undetermined_ if c["effect"] not in kept] + undetermined
             if not final.names:
                 break
         if changed:
@@ -680,11 +684,11 @@ class Discovery:
         """What was said of the parameters of effects no longer in the model (``gone``, effect names) as proxies."""
         self.limits_ = [x for x in self.limits_ if not ("proxy" in x and set(x["effects"]) <= gone)]
 
-    def _refit_kept(self, fitter, keys: list[str], previous: dict[str, np.ndarray]
+    def _refit_kept(self, fitter, keys: list[str], previous: dict[str, np.ndarray], inherited: bool = True
                     ) -> tuple[Candidate, dict[str, dict[int, float]], list]:
-        """``keys`` fitted again with the entries they had held, and what the flight does not determine among them
-        left out (:func:`~discovery.determination.refit_determined`)."""
-        hold = {k: v for k, v in self._hold.items() if k in keys}
+        """``keys`` fitted again with the entries they had held (none unless ``inherited``), and what the flight does
+        not determine among them left out (:func:`~discovery.determination.refit_determined`)."""
+        hold = {k: v for k, v in self._hold.items() if k in keys} if inherited else {}
         return refit_determined(fitter, fitter.candidate(keys, previous=previous, hold=hold), self._say, hold)
 
     def _rival_quantity(self) -> dict | None:
