@@ -323,6 +323,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rotor-radius", type=float, default=None,
                         help="the rotors' distance from the centre, m (default 0.125)")
     parser.add_argument("--plus", action="store_true", help="rotors on the body axes (default: on the diagonals)")
+    parser.add_argument("--corridor", type=float, default=None,
+                        help="in worlds whose scene has a wall, a second wall this far (m) from it, facing it, with the "
+                             "same suction")
     parser.add_argument("--noise", type=float, default=1.0, help="measurement noise times this (default 1)")
     args = parser.parse_args(argv)
     if not 0.25 < args.gain_floor < 5.0:  # at a quarter of the radius the image-rotor gain is infinite
@@ -343,6 +346,9 @@ def main(argv: list[str] | None = None) -> int:
     global WEIGHT
     independent_sim.WORLD_TURN, independent_sim.WORLD_SHIFT = math.radians(args.turn), shift
     independent_sim.NOISE_SCALE = args.noise
+    if args.corridor is not None and not 0.3 <= args.corridor <= 10.0:
+        parser.error(f"--corridor must be in [0.3, 10] m, got {args.corridor}")
+    independent_sim.SECOND_WALL_X = args.corridor
     if args.rotor_radius is not None or args.plus:
         radius = args.rotor_radius if args.rotor_radius is not None else 0.125
         independent_sim.ROTORS_BODY = independent_sim.rotor_layout(radius, args.plus)

@@ -59,6 +59,9 @@ GAIN_FLOOR_RADII = 0.6
 #: a world-frame wind, the vehicle's heading)
 WORLD_TURN = 0.0
 WORLD_SHIFT = (0.0, 0.0)
+#: with a number, a second wall at x = SECOND_WALL_X facing -x (a corridor): the same suction as the first (and
+#: ending at the same ``wall_top``), in the sidecar too wherever the first wall is
+SECOND_WALL_X: float | None = None
 #: the measurement noise's standard deviations (position 1 mm, velocity 1 cm/s, attitude 1 mrad, rates 5 mrad/s)
 #: times this
 NOISE_SCALE = 1.0
@@ -103,12 +106,12 @@ def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: 
                  produced: float = 0.0) -> np.ndarray:
     """World force (N) of ``effects`` besides the thrust map:
 
-    ``suction`` (k_s, d_thr) of a wall at x = 0 with normal +x (``wall_top``: the wall ends at that height, a
-    rotor above it feels nothing); ``wind_force`` (3,); ``gust`` (amplitude (3,), frequency Hz): a periodic
-    force; ``quadratic_drag`` (C (3,), wind (3,)); ``linear_drag`` (D (3,), body axes); ``height_force`` k
-    (N/m): ``-k z`` along world z, growing with height; ``ground`` (radius, offset) and ``ceiling`` (radius,
-    offset): the image-rotor gain of each rotor's share of the ``produced`` thrust near the ground (z = 0)
-    and under the ceiling (z = :data:`CEILING_Z`)."""
+    ``suction`` (k_s, d_thr) of a wall at x = 0 with normal +x (``wall_top``: the wall ends at that height, a rotor
+    above it feels nothing), and of a second one facing it at :data:`SECOND_WALL_X` when there is one;
+    ``wind_force`` (3,); ``gust`` (amplitude (3,), frequency Hz): a periodic force; ``quadratic_drag`` (C (3,), wind
+    (3,)); ``linear_drag`` (D (3,), body axes); ``height_force`` k (N/m): ``-k z`` along world z, growing with
+    height; ``ground`` (radius, offset) and ``ceiling`` (radius, offset): the image-rotor gain of each rotor's share
+    of the ``produced`` thrust near the ground (z = 0) and under the ceiling (z = :data:`CEILING_Z`)."""
     force = np.zeros(3)
     if "suction" in effects:
         k_s, d_thr = effects["suction"]
@@ -117,6 +120,8 @@ def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: 
             at = p + R @ rotor
             if at[2] <= top:
                 force[0] -= k_s * max(0.0, d_thr - max(at[0], 0.0))
+                if SECOND_WALL_X is not None:
+                    force[0] += k_s * max(0.0, d_thr - max(SECOND_WALL_X - at[0], 0.0))
     if "wind_force" in effects:
         force += np.asarray(effects["wind_force"], dtype=float)
     if "gust" in effects:
@@ -321,6 +326,9 @@ def write(rows: list[tuple], path: Path, seed: int, wall: bool = True, *, wall_n
         lines.append(",".join(f"{x:.9g}" for x in values))
     path.write_text("\n".join(lines) + "\n")
     walls = [{"point": shift.tolist(), "normal": (turn @ [wall_normal, 0.0, 0.0]).tolist()}] if wall else []
+    if wall and SECOND_WALL_X is not None:
+        walls.append({"point": (turn @ [SECOND_WALL_X, 0.0, 0.0] + shift).tolist(),
+                      "normal": (turn @ [-1.0, 0.0, 0.0]).tolist()})
     sidecar = {"vehicle": {"mass": MASS, "rotor_positions": ROTORS_BODY.tolist()},
                "scene": {"walls": walls, "ground_z": 0.0, "ceiling_z": CEILING_Z if ceiling else None},
                "gravity": GRAVITY}
