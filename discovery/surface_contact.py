@@ -87,7 +87,10 @@ UNDECLARED_APART_DEG = 45.0  # degrees: normals nearer than this to one taken ar
 #: the vertical plane through those points (the ring's normals are 10 degrees apart; 5 degrees off, the plane through
 #: one end of a 4 m survey lies 35 cm from its other end, where the strikes then go unseen)
 TURN_TO_POINTS_SPAN = 0.3
-TURN_TO_POINTS_MAX_DEG = 10.0  # the plane through the points is taken only this near the ring's normal
+#: degrees: the plane through the points is taken only this near the ring's normal (the normal nearest the strikes'
+#: push may be 13 degrees off when the guards slide along the wall as they strike it)
+TURN_TO_POINTS_MAX_DEG = 30.0
+TURN_TO_POINTS_WITHIN = 0.03  # m: and only when every point lies this near it (a corner's two walls do not)
 
 
 @dataclass(frozen=True)
@@ -278,8 +281,8 @@ def _turned_to_points(log: FlightLog, rotors_world: np.ndarray, struck: Strikes,
     normal, within the strike's window; the plane through the points (least squares across it) gives a normal, the
     points are taken again against that, until it turns by less than 0.1 degrees. Kept as it is when the points
     span less than :data:`TURN_TO_POINTS_SPAN` along it, when the plane through them is more than
-    :data:`TURN_TO_POINTS_MAX_DEG` off, when the turned plane is struck fewer times, or when it faces down (a
-    ceiling)."""
+    :data:`TURN_TO_POINTS_MAX_DEG` off or any point lies farther than :data:`TURN_TO_POINTS_WITHIN` from it, when
+    the turned plane is struck fewer times, or when it faces down (a ceiling)."""
     if abs(struck.normal[2]) > 1e-9 or times.size < 2:
         return struck
     pad = max(1, int(round(STRIKE_WINDOW_S / float(np.median(np.diff(log.t))))))
@@ -294,7 +297,8 @@ def _turned_to_points(log: FlightLog, rotors_world: np.ndarray, struck: Strikes,
             return struck
         turned = np.array([-along_wall[1], along_wall[0], 0.0])
         turned *= np.sign(turned @ ring)
-        if turned @ ring < np.cos(np.radians(TURN_TO_POINTS_MAX_DEG)):
+        if turned @ ring < np.cos(np.radians(TURN_TO_POINTS_MAX_DEG)) or \
+                np.abs(xy @ turned[:2]).max() > TURN_TO_POINTS_WITHIN:
             return struck
         settled = turned @ normal > np.cos(np.radians(0.1))
         normal = turned
