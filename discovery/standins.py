@@ -241,21 +241,21 @@ def own_quantity(effect: Effect, where: dict) -> bool:
 
 
 def test_effect(fitter: Fitter, final: Candidate, index: int, structures: list[Structure], where: dict, price: float,
-                hold: dict[str, dict[int, float]],
-                others: tuple[list[str], dict[str, dict[int, float]]]) -> tuple[dict | None, list[dict]]:
+                hold: dict[str, dict[int, float]]) -> tuple[dict | None, list[dict]]:
     """Effect ``index`` of the kept set ``final`` (fitted with the entries ``hold`` held) against the one of
     ``structures`` that scores best in its place, on held-out data (the fitter's scores): a stand-in record when that
     structure in its place scores better and the effect does not pay next to it, else the parameters the structure
-    moves (proxies). ``others``: the other effects as fitted without it, and the entries they then hold."""
+    moves (proxies). In its place the other effects are fitted with nothing held: an entry held at zero only because
+    this effect stood beside it (a vertical steady force that a thrust scale had taken over) takes its share back."""
     keys = list(final.names)
     key = keys[index]
-    others_keys, others_hold = others
+    others = [k for k in keys if k != key]
     previous = final.previous()
     tried = []
     for structure in structures:
         label = f"structure: {structure.option_values['label']}"
         fitter.add(label, structure)
-        tried.append((fitter.candidate(others_keys + [label], previous=previous, hold=others_hold), label, structure))
+        tried.append((fitter.candidate(others + [label], previous=previous), label, structure))
     replaced, label, structure = min(tried, key=lambda t: t[0].score)
     joint = fitter.candidate(keys + [label], previous=previous, hold=hold)
     effect = final.fit.effects[index]

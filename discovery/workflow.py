@@ -581,11 +581,10 @@ class Discovery:
             found: list[dict] = []
             for i, key in enumerate(final.names):
                 others = [k for k in final.names if k != key]
-                # the others as they are fitted without it: an entry held only because this effect stood beside
-                # it (a vertical steady force a thrust scale left undetermined) is free again
-                without, others_hold, _ = refit_determined(fitter, fitter.candidate(others, previous=final.previous()))
+                without = fitter.candidate(others, previous=final.previous(),
+                                           hold={k: v for k, v in self._hold.items() if k in others})
                 residual = data.concat(without.problem.out_of_fold(without.fit.fold_theta, r_nom)) \
-                    if without.problem is not None and without.names else data.concat(r_nom)
+                    if without.problem is not None and others else data.concat(r_nom)
                 if not is_unexplained(_rms(residual), self.noise_, data.weight, MIN_WEIGHT_SHARE):
                     continue
                 where = where_it_lives(data, residual, self.regressors_, self.noise_, self.unexplained_threshold)
@@ -596,8 +595,7 @@ class Discovery:
                     continue
                 self._say(f"asking whether {key} only stands in for a residual that {where['lives_in']} describes")
                 standin, proxies = test_effect(fitter, final, i, structures, where,
-                                               parameter_price(data.effective_samples()), self._hold,
-                                               (list(without.names), others_hold))
+                                               parameter_price(data.effective_samples()), self._hold)
                 if standin is not None:
                     found.append(standin)
                 for proxy in proxies:
