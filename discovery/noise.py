@@ -47,8 +47,8 @@ def step_residual(seg: Segment) -> np.ndarray:
     mass = seg.states.mass
     z_steps = step_average_samples(seg.states.R_body_to_world[:, :, 2])
     weight_less_thrust = mass * seg.gravity * np.array([0.0, 0.0, 1.0]) - seg.thrust[:-1, None] * z_steps
-    if seg.a_raw is not None:  # a measured acceleration: its step average
-        return mass * step_average_samples(seg.a_raw) + weight_less_thrust
+    if seg.a_steps is not None:  # a measured acceleration: its mean over each step
+        return mass * seg.a_steps + weight_less_thrust
     assert seg.v_raw is not None, "a segment keeps its logged velocity or acceleration"
     stretch = (np.diff(seg.t) / seg.dt)[:, None]  # each step over the median period
     slow = step_average_samples(seg.measured_force)

@@ -326,6 +326,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--corridor", type=float, default=None,
                         help="in worlds whose scene has a wall, a second wall this far (m) from it, facing it, with the "
                              "same suction")
+    parser.add_argument("--accelerometer", action="store_true", help="the logs have ax, ay, az too")
     parser.add_argument("--noise", type=float, default=1.0, help="measurement noise times this (default 1)")
     args = parser.parse_args(argv)
     if not 0.25 < args.gain_floor < 5.0:  # at a quarter of the radius the image-rotor gain is infinite
@@ -345,7 +346,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--shift must be two numbers x,y, got {args.shift!r}")
     global WEIGHT
     independent_sim.WORLD_TURN, independent_sim.WORLD_SHIFT = math.radians(args.turn), shift
-    independent_sim.NOISE_SCALE = args.noise
+    independent_sim.NOISE_SCALE, independent_sim.ACCELEROMETER = args.noise, args.accelerometer
     if args.corridor is not None and not 0.3 <= args.corridor <= 10.0:
         parser.error(f"--corridor must be in [0.3, 10] m, got {args.corridor}")
     independent_sim.SECOND_WALL_X = args.corridor

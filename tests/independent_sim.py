@@ -62,9 +62,11 @@ WORLD_SHIFT = (0.0, 0.0)
 #: with a number, a second wall at x = SECOND_WALL_X facing -x (a corridor): the same suction as the first (and
 #: ending at the same ``wall_top``), in the sidecar too wherever the first wall is
 SECOND_WALL_X: float | None = None
-#: the measurement noise's standard deviations (position 1 mm, velocity 1 cm/s, attitude 1 mrad, rates 5 mrad/s)
-#: times this
+#: the measurement noise's standard deviations (position 1 mm, velocity 1 cm/s, attitude 1 mrad, rates 5 mrad/s,
+#: acceleration 0.1 m/s^2) times this
 NOISE_SCALE = 1.0
+#: the log also has the world-frame acceleration (``ax, ay, az``) as an accelerometer feels it at each row's instant
+ACCELEROMETER = False
 #: position-loop gains that beat wall suction's pull (its negative stiffness, 2 k_s for two near rotors, reaches
 #: 14 N/m at k_s = 7 N/m; the default loop's 1.3 kg x 6 /s^2 = 7.8 N/m let the vehicle through the wall, which this
 #: simulator does not stop)
@@ -219,7 +221,7 @@ DESCEND_S, SPIN_DOWN_S = 5.0, 2.0
 def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: float, seed: int,
         force_noise: float = 0.25, motor_lag: float = 0.0, takeoff: bool = False,
         gains: dict | None = None, waypoints: float = 0.0) -> list[tuple]:
-    """Track ``centre + amplitude sin(2 pi t / period + phase)``; rows ``(t, p, v, q, w, T_cmd, w_cmd)``
+    """Track ``centre + amplitude sin(2 pi t / period + phase)``; rows ``(t, p, v, q, w, T_cmd, w_cmd, a)``
     at ``rate_hz``, each with the command applied from then on; the rotors lag it by ``motor_lag`` s.
     ``gains`` (``kp``, ``kd``, ``ki``, each per world axis) replace the position loop's defaults: near a wall or a
     ceiling its pull has a negative stiffness the loop must beat.
@@ -294,10 +296,11 @@ def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: floa
                 w_cmd[2] = -2.0 * math.atan2(R[1, 0], R[0, 0])  # yaw held at 0
                 if takeoff and t > end_survey + 0.5 * DESCEND_S and p[2] < REST_HEIGHT + 0.003 and abs(v[2]) < 0.05:
                     landed_at, landed_thrust = t, min(thrust, 0.9 * MASS * GRAVITY)
-            rows.append((t, p.copy(), v.copy(), q.copy(), w.copy(), thrust, w_cmd.copy()))
         inputs = (effects, thrust, w_cmd, rng.normal(0.0, force_noise, 3), motor_lag, t, takeoff)
         state = (p, v, q, w, produced)
         k1 = _derivative(state, *inputs)
+        if i % every == 0:  # the acceleration as an accelerometer feels it at this instant, disturbance and all
+            rows.append((t, p.copy(), v.copy(), q.copy(), w.copy(), thrust, w_cmd.copy(), k1[1].copy()))
         k2 = _derivative(tuple(x + _DT / 2 * k for x, k in zip(state, k1)), *inputs)
         k3 = _derivative(tuple(x + _DT / 2 * k for x, k in zip(state, k2)), *inputs)
         k4 = _derivative(tuple(x + _DT * k for x, k in zip(state, k3)), *inputs)
@@ -317,12 +320,14 @@ def write(rows: list[tuple], path: Path, seed: int, wall: bool = True, *, wall_n
     rng = np.random.default_rng(seed + 1)
     turn, shift = _turn(), np.array([*WORLD_SHIFT, 0.0])
     q_turn = np.array([math.cos(WORLD_TURN / 2), 0.0, 0.0, math.sin(WORLD_TURN / 2)])
-    lines = ["t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz,thrust_cmd,wx_cmd,wy_cmd,wz_cmd"]
-    for t, p, v, q, w, thrust, w_cmd in rows:
+    lines = ["t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz,thrust_cmd,wx_cmd,wy_cmd,wz_cmd" + (",ax,ay,az" * ACCELEROMETER)]
+    for t, p, v, q, w, thrust, w_cmd, a in rows:
         p, v, q = turn @ p + shift, turn @ v, _qmul(q_turn, q)
         q = _qmul(q, np.array([1.0, *rng.normal(0.0, 0.001 * NOISE_SCALE, 3)]))
         values = [t, *(p + rng.normal(0.0, 0.001 * NOISE_SCALE, 3)), *(v + rng.normal(0.0, 0.01 * NOISE_SCALE, 3)),
                   *(q / np.linalg.norm(q)), *(w + rng.normal(0.0, 0.005 * NOISE_SCALE, 3)), thrust, *w_cmd]
+        if ACCELEROMETER:
+            values += [*(turn @ a + rng.normal(0.0, 0.1 * NOISE_SCALE, 3))]
         lines.append(",".join(f"{x:.9g}" for x in values))
     path.write_text("\n".join(lines) + "\n")
     walls = [{"point": shift.tolist(), "normal": (turn @ [wall_normal, 0.0, 0.0]).tolist()}] if wall else []
