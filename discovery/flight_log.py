@@ -24,9 +24,9 @@ Other columns are allowed and ignored. Without ``ax, ay, az`` the acceleration i
 derived from the velocity by a smoothing differentiator
 (:mod:`discovery.differentiation`). With them, the instant each sample stands for (centred
 on its row, the mean over the step before it, or the row's instant under its command) is
-read from the log (:func:`discovery.residuals.accelerometer_steps`). Sample rates from 50 Hz to 1 kHz are supported;
-a gap longer than :data:`GAP_FACTOR` median sample periods (more than two samples
-missing) splits the log into segments that are processed separately.
+read from the log (:func:`discovery.residuals.accelerometer_steps`). Sample rates from
+50 Hz to 1 kHz are supported; a gap longer than :data:`GAP_FACTOR` median sample periods
+(more than two samples missing) splits the log into segments that are processed separately.
 
 The JSON file::
 
