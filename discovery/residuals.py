@@ -67,9 +67,10 @@ def step_average_samples(x: np.ndarray) -> np.ndarray:
 
 
 def accelerometer_steps(a: np.ndarray, v: np.ndarray, thrust: np.ndarray, z_body: np.ndarray, mass: float,
-                        kernel: LocalPolynomial) -> np.ndarray:
-    """The mean acceleration over each step ``(n - 1, 3)`` from a logged acceleration ``a`` ``(n, 3)``; ``thrust``
-    ``(n,)`` N is each row's thrust, held over the step the row starts, along the body z axis ``z_body`` ``(n, 3)``.
+                        kernel: LocalPolynomial) -> tuple[np.ndarray, bool]:
+    """The mean acceleration over each step ``(n - 1, 3)`` from a logged acceleration ``a`` ``(n, 3)``, and whether
+    each step's is the mean of its two samples (their noise then reaches it averaged); ``thrust`` ``(n,)`` N is each
+    row's thrust, held over the step the row starts, along the body z axis ``z_body`` ``(n, 3)``.
 
     Loggers stand a sample for different instants. A central difference of the velocity is centred on the row: a
     step's mean is that of its two samples. An IMU that integrates over the interval before each row gives the step's
@@ -83,8 +84,8 @@ def accelerometer_steps(a: np.ndarray, v: np.ndarray, thrust: np.ndarray, z_body
     jump = np.diff(thrust)[:, None] * z_body[1:] / mass  # the next row's command less this one's, at the next row
     candidates = (centred, centred - 0.5 * jump, a[1:])
     reference = kernel.derivative(v)
-    errors = [float(np.mean((kernel.step_average(c) - reference) ** 2)) for c in candidates]
-    return candidates[int(np.argmin(errors))]
+    best = int(np.argmin([float(np.mean((kernel.step_average(c) - reference) ** 2)) for c in candidates]))
+    return candidates[best], best < 2
 
 
 @dataclass
@@ -111,6 +112,7 @@ class Segment:
     # (n - 1, 3) mean acceleration over each step from the logged acceleration, when the log has one
     # (accelerometer_steps)
     a_steps: np.ndarray | None = field(repr=False, default=None)
+    a_steps_averaged: bool = False  # each of a_steps is the mean of two logged samples (their noise averaged)
     evaluators: dict = field(default_factory=dict, repr=False)
     flight: int = 0  # index of its flight among the flights fitted together (their own conditions)
 
@@ -304,7 +306,7 @@ def prepare(logs: list[FlightLog], *, window_s: float = DEFAULT_WINDOW_S, order:
             logged = thrust
             if vehicle.motor_time_constant > 0:  # the rotors produce the logged thrust late
                 rotor, thrust = lagged_thrust(rotor, t, vehicle.motor_time_constant)
-            a_steps = None if log.a_world is None else \
+            a_steps, averaged = (None, False) if log.a_world is None else \
                 accelerometer_steps(log.a_world[part], v_raw, thrust, R[:, :, 2], m, kernel)
             if a_steps is not None:
                 accel_term = m * kernel.step_average(a_steps)
@@ -322,7 +324,7 @@ def prepare(logs: list[FlightLog], *, window_s: float = DEFAULT_WINDOW_S, order:
             segments.append(Segment(index, log.source, t, states, thrust, log.omega_cmd_body[part], kernel,
                                     log.scene, log.gravity, measured, fold, train, logged, log.p_world[part],
                                     short.smooth(log.p_world[part]), short.smooth(v_raw),
-                                    None if log.a_world is not None else v_raw, a_steps))
+                                    None if log.a_world is not None else v_raw, a_steps, averaged))
     if not segments:
         raise ValueError("no log has a segment long enough to differentiate")
     flights = sorted({seg.log_index for seg in segments})

@@ -207,8 +207,9 @@ def test_an_accelerometer_is_read_at_the_instant_its_samples_stand_for(logged):
          "centred": np.gradient(v, dt)}[logged]
     kernel = LocalPolynomial(t, 1.0, 2)
     zeros = np.zeros(n)
-    steps = accelerometer_steps(np.column_stack([zeros, zeros, a]), np.column_stack([zeros, zeros, v]),
-                                thrust, np.column_stack([zeros, zeros, np.ones(n)]), m, kernel)
+    steps, averaged = accelerometer_steps(np.column_stack([zeros, zeros, a]), np.column_stack([zeros, zeros, v]),
+                                          thrust, np.column_stack([zeros, zeros, np.ones(n)]), m, kernel)
+    assert averaged == (logged != "over the step before the row")
     drag_acceleration = drag * np.abs(v).max() / m
     smoothed_error = kernel.step_average(steps[:, 2:] - means[:, None])[100:-100]
     assert np.abs(smoothed_error).max() < 0.005 * drag_acceleration

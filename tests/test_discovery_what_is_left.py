@@ -54,6 +54,17 @@ def test_a_clean_log_is_within_its_own_noise_floor(tmp_path):
     assert "within noise" in format_summary(found.report())
 
 
+def test_a_clean_log_with_an_accelerometer_is_within_its_own_noise_floor(tmp_path, monkeypatch):
+    """The same with the simulator's acceleration logged at each row: read as the mean of each step's two samples,
+    its white noise comes averaged. Fitted as white, the floor was 0.68 of the residual."""
+    import tests.independent_sim as sim
+
+    monkeypatch.setattr(sim, "ACCELEROMETER", True)
+    found = Discovery().fit(read_log(_log(tmp_path, "clean", {}, 302)))
+    assert found.names_ == [] and found.unexplained_ is None
+    assert 0.75 < found.gap_after_["force_rms_N"] / found.noise_["floor_N"] < 1.25
+
+
 @pytest.mark.parametrize("effects, names", [({}, []), ({"thrust_scale": 0.9, "thrust_offset": -1.2}, ["thrust_scale"])])
 def test_a_log_with_dropped_samples_keeps_the_noise_floor_of_the_full_log(tmp_path, effects, names):
     """One sample in twenty dropped at random (a logger that loses some): each velocity increment divided by its own
