@@ -52,7 +52,7 @@ CEILING_CLOSE = {"centre": (1.5, 0.0, CEILING_Z - 0.105), "amplitude": (0.6, 0.6
 TALL_WALL = {"centre": (0.25, 0.0, 1.2), "amplitude": (0.09, 0.5, 0.45), "period": (7.0, 9.0, 5.0), "gains": NEAR_WALL}
 TALL = {"centre": (1.5, 0.0, 1.2), "amplitude": (1.0, 1.0, 0.5), "period": (5.0, 6.0, 6.0)}
 RATES = (100.0, 50.0, 200.0)
-_REACH = -float(independent_sim.ROTORS_BODY[:, 0].min())  # m: the default layout's rotors' reach toward the wall
+_REACH = independent_sim.reach_toward_wall()  # m: the default layout's
 WEIGHT = MASS * GRAVITY
 #: parameters in the world's frame: turned back from the log's frame to be judged (the drags' coefficients are in
 #: body axes)
@@ -162,8 +162,7 @@ def fly_case(case: Case, seed: int, rate: float, folder: Path, waypoints: float 
     guard = independent_sim.WALL_GUARD_RADIUS if walled else case.unseen_wall
     flight = dict(case.flight)
     if walled:  # the same distances from the wall for the rotor nearest it, whatever the rotor layout
-        reach = -float(independent_sim.ROTORS_BODY[:, 0].min())
-        flight["centre"] = (flight["centre"][0] + reach - _REACH, *flight["centre"][1:])
+        flight["centre"] = (flight["centre"][0] + independent_sim.reach_toward_wall() - _REACH, *flight["centre"][1:])
     with _wall_guard(guard):
         rows = fly(_effects_for_flight(case, seed), duration=case.duration, rate_hz=rate, seed=seed,
                    motor_lag=case.motor_lag, takeoff=case.takeoff, waypoints=waypoints, **flight)
@@ -321,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="write each log in a frame turned by this many degrees about z (the flight is the same)")
     parser.add_argument("--shift", default="0,0", help="and shifted by this x,y (m)")
     parser.add_argument("--rotor-radius", type=float, default=None,
-                        help="the rotors' distance from the centre, m (default 0.125)")
+                        help=f"the rotors' distance from the centre, m (default {independent_sim.ROTOR_RADIUS})")
     parser.add_argument("--plus", action="store_true", help="rotors on the body axes (default: on the diagonals)")
     parser.add_argument("--corridor", type=float, default=None,
                         help="in worlds whose scene has a wall, a second wall this far (m) from it, facing it, with the "
@@ -341,17 +340,17 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--rotor-radius must be in [0.05, 0.5] m, got {args.rotor_radius}")
     if not 0.0 <= args.noise <= 20.0:
         parser.error(f"--noise must be in [0, 20], got {args.noise}")
+    if args.corridor is not None and not 0.3 <= args.corridor <= 10.0:
+        parser.error(f"--corridor must be in [0.3, 10] m, got {args.corridor}")
     shift = tuple(float(x) for x in args.shift.split(","))
     if len(shift) != 2:
         parser.error(f"--shift must be two numbers x,y, got {args.shift!r}")
     global WEIGHT
     independent_sim.WORLD_TURN, independent_sim.WORLD_SHIFT = math.radians(args.turn), shift
     independent_sim.NOISE_SCALE, independent_sim.ACCELEROMETER = args.noise, args.accelerometer
-    if args.corridor is not None and not 0.3 <= args.corridor <= 10.0:
-        parser.error(f"--corridor must be in [0.3, 10] m, got {args.corridor}")
     independent_sim.SECOND_WALL_X = args.corridor
     if args.rotor_radius is not None or args.plus:
-        radius = args.rotor_radius if args.rotor_radius is not None else 0.125
+        radius = args.rotor_radius if args.rotor_radius is not None else independent_sim.ROTOR_RADIUS
         independent_sim.ROTORS_BODY = independent_sim.rotor_layout(radius, args.plus)
     independent_sim.GAIN_FLOOR_RADII = args.gain_floor
     independent_sim.MASS, WEIGHT = args.mass, args.mass * GRAVITY

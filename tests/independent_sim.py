@@ -28,8 +28,7 @@ import numpy as np
 
 GRAVITY = 9.81
 MASS = 1.3
-_ARM = 0.125 / math.sqrt(2.0)
-ROTORS_BODY = np.array([[_ARM, -_ARM, 0.0], [-_ARM, _ARM, 0.0], [_ARM, _ARM, 0.0], [-_ARM, -_ARM, 0.0]])
+ROTOR_RADIUS = 0.125  # m, the rotors' distance from the centre
 
 
 def rotor_layout(radius: float, plus: bool = False) -> np.ndarray:
@@ -39,6 +38,16 @@ def rotor_layout(radius: float, plus: bool = False) -> np.ndarray:
         return np.array([[radius, 0.0, 0.0], [-radius, 0.0, 0.0], [0.0, radius, 0.0], [0.0, -radius, 0.0]])
     arm = radius / math.sqrt(2.0)
     return np.array([[arm, -arm, 0.0], [-arm, arm, 0.0], [arm, arm, 0.0], [-arm, -arm, 0.0]])
+
+
+ROTORS_BODY = rotor_layout(ROTOR_RADIUS)
+
+
+def reach_toward_wall() -> float:
+    """m: how far the rotor centres reach toward the wall at x = 0 (along -x) at yaw 0."""
+    return -float(ROTORS_BODY[:, 0].min())
+
+
 _DT = 0.002  # s, integration step
 _RATE_LAG = 0.03  # s, body-rate response
 REST_HEIGHT = 0.06  # m, height of the centre of mass (and the rotors) resting on the ground's landing gear
