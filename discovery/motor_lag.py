@@ -35,7 +35,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from discovery.residuals import FlightData, step_average_samples
+from discovery.residuals import FlightData
 from wall_env.effects import Effect, FlightContext, Parameter, Wrench
 from wall_env.motor_lag import held_command_response
 
@@ -109,7 +109,6 @@ class LagTerm:
         self.size = effect.param_size
         self.low, self.high = effect.param_bounds()
         self._rows = [seg.fit_rows for seg in data.segments]
-        self._z_steps = [step_average_samples(seg.states.R_body_to_world[:, :, 2]) for seg in data.segments]
         self._cache: dict[int, tuple[bytes, tuple[np.ndarray, np.ndarray]]] = {}
 
     def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
@@ -141,7 +140,7 @@ class LagTerm:
         tau, starts = float(theta[0]), theta[1:]
         seg = self.data.segments[s]
         start = float(starts[s]) if starts.size else 0.0
-        return lag_force_steps(seg.thrust_logged, seg.t, self._z_steps[s], tau, start)
+        return lag_force_steps(seg.thrust_logged, seg.t, seg.z_body_steps, tau, start)
 
     def at_rows(self, segment: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, p)`` at the segment's fit rows."""

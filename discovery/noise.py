@@ -49,8 +49,7 @@ def step_residual(seg: Segment) -> np.ndarray:
     (an affine thrust map's offset) scaled by the longer steps alone was spikes of white power eight times the
     noise's."""
     mass = seg.states.mass
-    z_steps = step_average_samples(seg.states.R_body_to_world[:, :, 2])
-    weight_less_thrust = mass * seg.gravity * np.array([0.0, 0.0, 1.0]) - seg.thrust[:-1, None] * z_steps
+    weight_less_thrust = mass * seg.gravity * np.array([0.0, 0.0, 1.0]) - seg.thrust[:-1, None] * seg.z_body_steps
     if seg.a_steps is not None:  # a measured acceleration: its mean over each step
         return mass * seg.a_steps + weight_less_thrust
     assert seg.v_raw is not None, "a segment keeps its logged velocity or acceleration"

@@ -39,6 +39,7 @@ cross-validation folds (:attr:`Segment.fold`) that all held-out figures use.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -165,6 +166,12 @@ class Segment:
         if key not in self.evaluators:
             self.evaluators[key] = ForceEvaluator(model, rotor_positions_body, self.scene, self.gravity)
         return self.evaluators[key]
+
+    @cached_property
+    def z_body_steps(self) -> np.ndarray:
+        """The body z axis in the world frame averaged over each step ``(n - 1, 3)``: the direction of the thrust
+        held over the step (the measured force, the noise floor's step residual and a motor lag's force)."""
+        return step_average_samples(self.states.R_body_to_world[:, :, 2])
 
     def smooth_force(self, force_samples: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
         """``K[F]``: matched smoothing of per-sample forces ``(n, 3, ...)`` (only at ``rows`` if given)."""
