@@ -108,6 +108,8 @@ class Strikes:
     in_contact: np.ndarray  # (n,) bool: nearer the surface than touch_distance, or within STRIKE_WINDOW_S of it
     stopped_at: float | None = None  # m along the normal (world) where the rotor centres went farthest against it:
     # where the strikes stopped them; given for a surface not in the scene, whose place they are all we know of
+    give: float = SAME_DISTANCE  # m: how far short of the closest approach a strike may stop (the guard gives more
+    # the faster it strikes): SAME_DISTANCE and half the fastest strike's speed times STRIKE_WINDOW_S
 
 
 def outward_jolt(log: FlightLog, normal: np.ndarray) -> np.ndarray:
@@ -172,8 +174,14 @@ def _was_approaching(log: FlightLog, normal: np.ndarray, i: int, jolt: float, ha
     own, its mean speed toward the surface is at least :data:`APPROACH_SHARE` of the speed the jolt took away
     (``jolt`` times its window). A glitch in the velocity estimate, or a hold's noise, jolts a vehicle that was not
     moving. ``dt``: the log's median period."""
+    return _approach_speed(log, normal, i, half) >= APPROACH_SHARE * jolt * 2 * half * dt
+
+
+def _approach_speed(log: FlightLog, normal: np.ndarray, i: int, half: int) -> float:
+    """The mean speed (m/s) toward the surface over the window before the jolt's own at sample ``i`` (negative:
+    away from it)."""
     before = log.v_world[max(0, i - 3 * half):max(1, i - half), :] @ normal
-    return bool(-before.mean() >= APPROACH_SHARE * jolt * 2 * half * dt)
+    return float(-before.mean())
 
 
 def _stays_pinned(t: np.ndarray, distance: np.ndarray, i: int, touch: float) -> bool:
@@ -281,11 +289,12 @@ def _turned_to_points(log: FlightLog, rotors_world: np.ndarray, struck: Strikes,
     normal, within the strike's window; the plane through the points (least squares across it) gives a normal, the
     points are taken again against that, until it turns by less than 0.1 degrees. Kept as it is when the points
     span less than :data:`TURN_TO_POINTS_SPAN` along it, when the plane through them is more than
-    :data:`TURN_TO_POINTS_MAX_DEG` off or any point lies farther than :data:`TURN_TO_POINTS_WITHIN` from it, when
+    :data:`TURN_TO_POINTS_MAX_DEG` off or any point lies farther than :data:`TURN_TO_POINTS_WITHIN` from it (more
+    what the guards gave beyond :data:`SAME_DISTANCE`, :attr:`Strikes.give`: slower strikes stop short), when
     the turned plane is struck fewer times, or when it faces down (a ceiling)."""
     if abs(struck.normal[2]) > 1e-9 or times.size < 2:
         return struck
-    pad = max(1, int(round(STRIKE_WINDOW_S / float(np.median(np.diff(log.t))))))
+    pad = _strike_pad(float(np.median(np.diff(log.t))))
     windows = [rotors_world[max(0, i - pad):i + pad + 1] for i in np.searchsorted(log.t, times)]
     ring = normal = struck.normal
     for _ in range(10):
@@ -298,7 +307,7 @@ def _turned_to_points(log: FlightLog, rotors_world: np.ndarray, struck: Strikes,
         turned = np.array([-along_wall[1], along_wall[0], 0.0])
         turned *= np.sign(turned @ ring)
         if turned @ ring < np.cos(np.radians(TURN_TO_POINTS_MAX_DEG)) or \
-                np.abs(xy @ turned[:2]).max() > TURN_TO_POINTS_WITHIN:
+                np.abs(xy @ turned[:2]).max() > TURN_TO_POINTS_WITHIN + struck.give - SAME_DISTANCE:
             return struck
         settled = turned @ normal > np.cos(np.radians(0.1))
         normal = turned
@@ -332,6 +341,11 @@ def _onset(jump: np.ndarray, level: float, first: int, half: int) -> np.ndarray:
     return np.arange(max(0, start - half), start + 1)
 
 
+def _strike_pad(dt: float) -> int:
+    """Samples of period ``dt`` (s) in a strike's window, :data:`STRIKE_WINDOW_S`, on each side of it (at least one)."""
+    return max(1, int(round(STRIKE_WINDOW_S / dt)))
+
+
 def _strikes_on(log: FlightLog, surface: str, effect: str | None, normal: np.ndarray, distance: np.ndarray,
                 closest: float, jolt: np.ndarray, *, candidates: np.ndarray, pressed: bool,
                 from_onset: bool = False) -> Strikes | None:
@@ -348,9 +362,20 @@ def _strikes_on(log: FlightLog, surface: str, effect: str | None, normal: np.nda
         return None
     centre = float(np.median(jolt[finite]))
     scatter = max(SCATTER_FLOOR, 1.4826 * float(np.median(np.abs(jolt[finite] - centre))))
-    hits = np.flatnonzero(finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter)
-                          & (distance < closest + SAME_DISTANCE) & candidates)
-    hits = hits[[_was_approaching(log, normal, int(i), float(jolt[i]), half, dt) for i in hits]]
+    jolted = finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter) & candidates
+
+    def hits_within(give: float) -> np.ndarray:
+        hits = np.flatnonzero(jolted & (distance < closest + give))
+        return hits[[_was_approaching(log, normal, int(i), float(jolt[i]), half, dt) for i in hits]]
+
+    # a guard gives more the faster it strikes: the strikes at the closest approach are the fastest, and a slower
+    # one stopped short of them by up to what they gave (stopped within STRIKE_WINDOW_S, at most half their speed
+    # times that: 4 cm between strikes at 5 and 0.3 m/s on a 3000 N/m guard)
+    hits = near = hits_within(SAME_DISTANCE)
+    give = SAME_DISTANCE + 0.5 * STRIKE_WINDOW_S * max((_approach_speed(log, normal, int(i), half) for i in hits),
+                                                       default=0.0)
+    if give > SAME_DISTANCE:
+        hits = hits_within(give)
     strikes: list[list[int]] = []
     for i in hits:
         if strikes and log.t[i] - log.t[strikes[-1][-1]] <= STRIKE_SEPARATION_S:
@@ -359,19 +384,24 @@ def _strikes_on(log: FlightLog, surface: str, effect: str | None, normal: np.nda
             strikes.append([int(i)])
     against = (pressed_against(log, normal) & (distance < NEAR_SURFACE) & candidates if pressed
                else np.zeros(log.n_samples, dtype=bool))
-    struck = len(strikes) >= MIN_STRIKES or any(
-        _stays_pinned(log.t, distance, s[-1], float(distance[hits].max()) + CONTACT_MARGIN) for s in strikes)
+    # the guards touch the surface at least as far out as the strikes near the closest approach reached, and as
+    # where each strike stopped the rotor centres (a slower one, giving less, stops short of the closest); not as
+    # far as every sample of a slower strike's jolt, whose centred window begins before the guard touches
+    pad = _strike_pad(dt)
+    stops = [float(distance[max(0, s[0] - pad):s[-1] + pad + 1].min()) for s in strikes]
+    reach = max([float(distance[near].max()) if near.size else -np.inf, *stops]) + CONTACT_MARGIN
+    struck = len(strikes) >= MIN_STRIKES or any(_stays_pinned(log.t, distance, s[-1], reach) for s in strikes)
     if not struck and against.sum() * dt < PRESSED_S:
         return None
-    touching = np.concatenate([hits if struck else np.zeros(0, dtype=int), np.flatnonzero(against)])
+    touching = np.flatnonzero(against)
     if from_onset and struck:
         touching = np.concatenate([touching, *(_onset(jolt, centre + ONSET_Z * scatter, s[0], half) for s in strikes)])
-    touch = float(distance[touching].max()) + CONTACT_MARGIN
+    touch = max(reach if struck else -np.inf, float(distance[touching].max()) + CONTACT_MARGIN if touching.size
+                else -np.inf)
     peaks = np.array([log.t[max(s, key=lambda i: jolt[i])] for s in strikes]) if struck else np.zeros(0)
     # widened by the jolt's window on each side: a stiff guard bounces the vehicle off in a sample or two, too
     # short a gap to cut the log there, and the residual's smoothing would carry the impulse into the samples
     # kept on either side
-    pad = max(1, int(round(STRIKE_WINDOW_S / dt)))
     in_contact = np.convolve((distance < touch).astype(float), np.ones(2 * pad + 1), mode="same") > 0
     return Strikes(surface=surface, effect=effect, normal=normal, times=peaks, pressed_s=float(against.sum() * dt),
-                   closest=closest, touch_distance=touch, in_contact=in_contact)
+                   closest=closest, touch_distance=touch, in_contact=in_contact, give=give)

@@ -94,7 +94,6 @@ from discovery.selection import (
 from discovery.standins import OWN_QUANTITIES, depends_on, own_quantity, structures_for, test_effect
 from discovery.surface_contact import (
     CONTACT_MARGIN,
-    SAME_DISTANCE,
     STRIKE_WINDOW_S,
     STRIKE_Z,
     UNDECLARED_CONTACT,
@@ -821,7 +820,7 @@ class Discovery:
                 evidence.append(
                     f"struck {name} {_listed_times(struck.times)}: each time pushed away from it more "
                     f"than {STRIKE_Z:g} times the log's own scatter beyond what the thrust and gravity do, within "
-                    f"{1e3 * STRIKE_WINDOW_S:g} ms, and within {1e3 * SAME_DISTANCE:g} mm of its closest approach")
+                    f"{1e3 * STRIKE_WINDOW_S:g} ms, and within {1e3 * struck.give:.3g} mm of its closest approach")
             if struck.pressed_s > 0:
                 evidence.append(
                     f"was pressed against {name} for {struck.pressed_s:.1f} s: pushed away from it more than "
@@ -854,7 +853,7 @@ class Discovery:
                 f"{log.source}: the vehicle struck a surface the scene does not have {_listed_times(struck.times)}: "
                 f"each time pushed along {normal} (world) more than {STRIKE_Z:g} times the log's own "
                 f"scatter beyond what the thrust and gravity do, within {1e3 * STRIKE_WINDOW_S:g} ms, where its rotor "
-                f"centres went farthest against that direction (within {1e3 * SAME_DISTANCE:g} mm of {reach:.3f} m "
+                f"centres went farthest against that direction (within {1e3 * struck.give:.3g} mm of {reach:.3f} m "
                 f"along it). {in_contact.sum() * dt:.1f} s there (or held there) are left out as {reason}, a force "
                 f"that is not aerodynamic. If it is a wall or a ceiling, add it to the scene (sidecar or --scene) "
                 f"{place}; its suction or ceiling effect can then be fitted too")

@@ -31,8 +31,9 @@ VELOCITY_NOISE = 0.003  # m/s
 CEILING_Z = 2.0  # m
 
 
-def _survey(depth: float, seed: int = 0, *, velocity_lag_s: float = 0.0, velocity_noise: float = VELOCITY_NOISE,
-            accelerometer: bool = False, ceiling: bool = False, along_wall: float = 0.0) -> tuple[FlightLog, np.ndarray]:
+def _survey(depth: float | np.ndarray, seed: int = 0, *, velocity_lag_s: float = 0.0,
+            velocity_noise: float = VELOCITY_NOISE, accelerometer: bool = False, ceiling: bool = False,
+            along_wall: float = 0.0, amplitude: float = AMPLITUDE, give_s: float = 0.0) -> tuple[FlightLog, np.ndarray]:
     """A vehicle flying toward and away from a wall at x = 0 (normal +x): its loop (a PD on position, the thrust
     tilted to give the acceleration it asks) steers a sinusoid whose turning point lies ``depth`` past where the
     wall stops it (negative: short of it). Where the vehicle would pass the stop, the wall stops it dead and holds
@@ -41,7 +42,9 @@ def _survey(depth: float, seed: int = 0, *, velocity_lag_s: float = 0.0, velocit
     acceleration too (0.1 m/s^2 noise). With ``ceiling`` the same up and down under a ceiling at z = CEILING_Z
     (normal -z), level, the thrust carrying the weight and the loop's acceleration. ``along_wall`` (m): the vehicle also
     swings along the wall (y) by this much either side, at half the survey's frequency, so that the strikes fall at
-    one end and the other in turn (rolled to give that acceleration too). Returns the log and the samples the surface
+    one end and the other in turn (rolled to give that acceleration too). ``depth`` may change over the flight (one
+    value per sample of the 20 s), and ``amplitude`` (m) is the sinusoid's. With ``give_s`` (s) the guard gives:
+    struck at speed v, it stops the vehicle ``give_s v`` past the stop. Returns the log and the samples the surface
     held."""
     vehicle = NominalVehicle.from_vehicle_params(VehicleParams(mass=MASS))
     # x: the distance coordinate (the wall's x; under the ceiling, the rotors' depth below it)
@@ -49,21 +52,24 @@ def _survey(depth: float, seed: int = 0, *, velocity_lag_s: float = 0.0, velocit
     x_stop = STOP - float(rotor_x.min())  # where the vehicle stops when level
     t = np.arange(int(20.0 * RATE_HZ)) / RATE_HZ
     omega, dt = 2 * np.pi / PERIOD_S, 1.0 / RATE_HZ
-    x_ref = x_stop - depth + AMPLITUDE * (1 + np.cos(omega * t))  # from the far end, turning at 2, 6, ... s
-    v_ref = -AMPLITUDE * omega * np.sin(omega * t)
-    a_ref = -AMPLITUDE * omega ** 2 * np.cos(omega * t)
+    x_ref = x_stop - depth + amplitude * (1 + np.cos(omega * t))  # from the far end, turning at 2, 6, ... s
+    v_ref = -amplitude * omega * np.sin(omega * t)
+    a_ref = -amplitude * omega ** 2 * np.cos(omega * t)
     swing = omega / 2 * (t - PERIOD_S / 2)  # at the ends of the wall at every turning point: 2, 6, ... s
     y, v_y, a_y = (along_wall * f for f in (np.cos(swing), -omega / 2 * np.sin(swing), -(omega / 2) ** 2 * np.cos(swing)))
     x, v, a = np.zeros(len(t)), np.zeros(len(t)), np.zeros(len(t))
     held = np.zeros(len(t), dtype=bool)
     x[0], v[0] = x_ref[0], v_ref[0]
+    give = 0.0
     for k in range(len(t)):
         a[k] = a_ref[k] + 4.0 * (x_ref[k] - x[k]) + 4.0 * (v_ref[k] - v[k])
         if k + 1 < len(t):
             v[k + 1], x[k + 1] = v[k] + a[k] * dt, x[k] + (v[k] + 0.5 * a[k] * dt) * dt
             stop = STOP - float(_rotor_x(vehicle.rotor_positions_array, a[k], a_y[k]).min()) if not ceiling else STOP
-            if x[k + 1] < stop:  # the wall: stopped dead (a strike), held while the loop pushes toward it
-                x[k + 1], v[k + 1], held[k + 1] = stop, 0.0, True
+            if not held[k]:
+                give = give_s * max(0.0, -v[k])  # what the guard gives, struck at this speed
+            if x[k + 1] < stop - give:  # the wall: stopped (a strike), held while the loop pushes toward it
+                x[k + 1], v[k + 1], held[k + 1] = stop - give, 0.0, True
     rng = np.random.default_rng(seed)
     v_estimate = v.copy()
     for k in range(1, len(t)):
@@ -281,6 +287,25 @@ def test_an_undeclared_wall_struck_along_its_length_is_turned_to_the_plane_throu
     assert np.degrees(np.arccos(min(1.0, struck.normal @ [np.cos(yaw), np.sin(yaw), 0.0]))) < 0.2
     assert len(struck.times) == 5 and struck.in_contact[held].all()
     assert normal_text(struck.normal) == "(+0.815, +0.579, +0.000)"
+
+
+def test_strikes_at_several_speeds_on_a_guard_that_gives_are_all_strikes_on_one_wall():
+    """Struck ever faster (0.5 to 1.3 m/s) into a guard that gives 15 ms times the speed it is struck at, the fastest
+    strike goes farthest and the others stop short of it by up to 12 mm. Each of the five is a strike, on the
+    declared wall and on the same wall missing from the scene, and every sample the wall held is in contact.
+    Counting only strikes within SAME_DISTANCE of the farthest found four."""
+    n = int(20.0 * RATE_HZ)
+    log, held = _survey(depth=np.linspace(0.01, 0.5, n), amplitude=1.0, give_s=0.015)
+    (wall,) = surface_strikes(log)
+    assert len(wall.times) == 5 and wall.in_contact[held].all()
+    speeds = [-float(log.v_world[max(0, i - 5):i - 1, 0].mean()) for i in np.searchsorted(log.t, wall.times)]
+    assert min(speeds) > 0.4 and max(speeds) > 1.2
+    farthest = [float(log.p_world[max(0, i - 3):i + 4, 0].min()) for i in np.searchsorted(log.t, wall.times)]
+    assert np.ptp(farthest) > 2 * SAME_DISTANCE
+    assert wall.give == pytest.approx(SAME_DISTANCE + 0.5 * STRIKE_WINDOW_S * max(speeds), rel=0.1)
+    hidden = FlightLog(**{**log.__dict__, "scene": Scene((), 0.0, None)})
+    (struck,) = undeclared_strikes(hidden, np.zeros(hidden.n_samples, dtype=bool))
+    assert np.allclose(struck.normal, [1.0, 0.0, 0.0]) and len(struck.times) == 5 and struck.in_contact[held].all()
 
 
 def test_strikes_on_a_ceiling_the_scene_does_not_have_face_down():
