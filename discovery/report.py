@@ -13,11 +13,13 @@ Keys:
     ``null`` when no lag was looked for (the vehicle block gives ``motor_time_constant``,
     or one effect was fitted alone), else the lag fitted next to the chosen effects
     (:mod:`discovery.motor_lag`): ``{"time_constant_s", "std_s", "interval_95_share", "to_narrow",
-    "explained", "force_rms_N", "kept", "reason", "determined", "moves"}`` (``interval_95_share``:
+    "explained", "force_rms_N", "kept", "reason", "determined", "moves", "effect_std"}`` (``interval_95_share``:
     the 95 % interval's half-width as a share of the time constant; ``to_narrow``: the manoeuvre
     that determines it better when that share is above 10 %, else ``null``; ``moves``: the chosen
-    parameter the lag would change most, when by more than 5 % and two standard errors). A kept lag is the model
-    file's vehicle ``motor_time_constant``, and the effects above were chosen with it.
+    parameter the lag would change most, when by more than 5 % and two standard errors; ``effect_std``: each chosen
+    effect's standard errors fitted beside the lag). A kept lag is the model file's vehicle ``motor_time_constant``,
+    and the effects above were chosen with it; their ``param_std`` are at least those of ``effect_std``, which carry
+    the lag's own uncertainty.
 ``gap_before``, ``gap_after``
     ``{"force_rms_N", "prediction_rms_m"}`` on held-out data for the nominal and the
     discovered model: RMS of the force residual (vector norm, N) and of the open-loop

@@ -382,13 +382,14 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
     smaller, one price short, and D[2] 23 % low without it). Next to a structure the effects leave,
     neither relaxation is trusted (a 94 ms lag was kept beside a force growing with height).
     Returns ``{"time_constant_s", "std_s", "interval_95_share", "to_narrow", "explained",
-    "force_rms_N", "kept", "reason", "determined", "moves"}`` (``interval_95_share``: the 95 %
+    "force_rms_N", "kept", "reason", "determined", "moves", "effect_std"}`` (``interval_95_share``: the 95 %
     interval's half-width as a share of the time constant; ``to_narrow``: the manoeuvre that
     determines it better, when that share is above :data:`~discovery.determination.NARROW_INTERVAL_SHARE`, else None;
     ``explained``: the share of the nominal held-out energy it adds to the chosen effects, on the
     rows past the starts;
     ``force_rms_N``: the force it accounts for; ``determined``: its interval is away from zero
-    and its bounds; ``moves``: :func:`_moves`).
+    and its bounds; ``moves``: :func:`_moves`; ``effect_std``: each chosen effect's standard errors
+    fitted beside the lag, which carry the lag's own uncertainty).
 
     A lag found on a climb and descent at one pace is told apart from a vertical drag only by the
     thrust's other changes, so one minute of such a flight determines it to about 6 % (one
@@ -445,9 +446,10 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
     explained = (without[1] - with_lag[1]) / nominal_mse if nominal_mse > 0 else 0.0
     share = Z_95 * tau_std / tau if tau > 0 else math.inf
     to_narrow = MANOEUVRES[(LAG_KEY, "time_constant")] if share > NARROW_INTERVAL_SHARE else None
+    joint_std = {e.name: std for e, std in zip(cand.fit.effects[:-1], cand.fit.std_dicts()[:-1])}
     return {"time_constant_s": tau, "std_s": tau_std, "interval_95_share": share, "to_narrow": to_narrow,
             "explained": explained, "force_rms_N": force_rms,
-            "kept": not reason, "reason": reason, "determined": not cases, "moves": moves}
+            "kept": not reason, "reason": reason, "determined": not cases, "moves": moves, "effect_std": joint_std}
 
 
 def _scored_on(fitter: Fitter, cand: Candidate, rows: list[np.ndarray]) -> tuple[float, float]:

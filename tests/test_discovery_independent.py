@@ -76,6 +76,15 @@ def test_a_motor_lag_from_another_simulator_is_found_and_leaves_the_vertical_dra
     assert given.motor_lag_ is None and given.model_.vehicle.motor_time_constant == 0.03
     assert given.names_ == ["linear_drag"]
     assert max(relative_errors(given.effects_[0].values, {"D": D})) < 0.05
+    # the vertical drag moves with the lag: the lag found carries its own error into the drag's, which a lag taken as
+    # known does not. The drag's standard errors are those it had fitted beside the lag, at least what the lag's
+    # standard error moves it by
+    moves = lag["moves"]
+    assert moves["effect"] == "linear_drag" and moves["parameter"] == "D[2]"
+    carried = abs(moves["with"] - moves["without"]) / lag["time_constant_s"] * lag["std_s"]
+    std, known = found.param_std_[0]["D"], given.param_std_[0]["D"]
+    assert known[2] < 0.5 * carried <= 0.5 * std[2]
+    assert std == pytest.approx(np.fmax(known, lag["effect_std"]["linear_drag"]["D"]), rel=0.05)
     # the same flight without the lag: nothing is taken for one
     rows = fly({"linear_drag": D}, centre=(1.5, 0.0, 1.0), amplitude=(1.0, 1.0, 0.4), period=(5.0, 6.0, 3.0),
                duration=62.0, rate_hz=100.0, seed=5)[200:]
