@@ -3,7 +3,9 @@
 A parameter is *determined* when its 95 % confidence interval (value +- 1.96 standard
 errors) is finite, excludes the value at which it has no effect (:data:`NULL_VALUES`:
 zero drag, zero force, zero wind, no suction, a thrust scale of one) and stays away
-from the bounds of its range. Nothing undetermined goes into the model file:
+from the bounds of its range. The horizontal components of a vector along the world axes (a
+steady force, a wind) are judged together, by their 95 % region, so that a log written in a frame
+turned about the vertical determines the same. Nothing undetermined goes into the model file:
 
 - an undetermined entry of a vector parameter (drag along one body axis, one
   component of a steady force or of the wind) is set to its null value: that axis
@@ -28,11 +30,12 @@ from wall_env.effects import Effect, Parameter
 if TYPE_CHECKING:
     from discovery.fitting import Candidate, Fitter
 
-__all__ = ["Z_95", "NARROW_INTERVAL_SHARE", "NULL_VALUES", "NULL_BY_EFFECT", "null_value", "MANOEUVRES", "Undetermined",
+__all__ = ["Z_95", "CHI2_2_95", "NARROW_INTERVAL_SHARE", "NULL_VALUES", "NULL_BY_EFFECT", "null_value", "MANOEUVRES", "Undetermined",
            "undetermined_cases", "restrict", "determined", "entry", "nothing_left", "open_cases", "refit_determined",
            "determining_manoeuvre", "separating_manoeuvre", "loose_parameters"]
 
 Z_95 = 1.96
+CHI2_2_95 = 5.991  # the chi-square distribution's 95 % point with two degrees of freedom (-2 ln 0.05)
 #: a written parameter whose 95 % interval is wider than this share of its value on either side is reported with the
 #: manoeuvre that narrows it (the acceptance figures ask parameters within 10 %)
 NARROW_INTERVAL_SHARE = 0.10
@@ -121,13 +124,34 @@ def _reason(value: float, std: float, low: float, high: float, null: float | Non
     return None
 
 
+def _horizontal_reason(value: np.ndarray, error: np.ndarray, null: float) -> str | None:
+    """Why a world vector's horizontal part (``value`` and ``error``: its x and y entries) is not determined: both
+    components together within their 95 % region about ``null`` (``sum ((v - null) / std)^2`` at most
+    :data:`CHI2_2_95`, the components' correlation left out); None when it is determined."""
+    chi2 = float(np.sum(((value - null) / error) ** 2))
+    if chi2 > CHI2_2_95:
+        return None
+    return (f"its horizontal part ({value[0]:.4g}, {value[1]:.4g}) lies within its 95 % region about {null:g}, where "
+            f"it has no effect (x and y together: {chi2:.2f} <= {CHI2_2_95:.2f})")
+
+
 def undetermined_cases(effects: list[Effect], stds: list[dict]) -> list[Undetermined]:
-    """Every parameter entry the flight did not determine (see the module text)."""
+    """Every parameter entry the flight did not determine (see the module text).
+
+    A vector along the world axes (:attr:`~wall_env.effects.base.Parameter.frame` ``"world"``: a steady force, a
+    wind) has its horizontal components judged together, so that what is determined does not depend on how the log's
+    frame is turned about the vertical: 0.47 N along a turned frame's y and 0.04 N along its x, the x alone within
+    noise, is one determined horizontal force. Its vertical component, along gravity in any frame, is judged alone."""
     cases = []
     for effect, p, value, error in _entries(effects, stds):
         null = null_value(effect.name, p.name)
+        together = p.frame == "world" and p.size == 3 and null is not None and bool(np.all(error[:2] > 0))
+        horizontal = _horizontal_reason(value[:2], error[:2], float(null)) if together and null is not None else None
         for i in range(value.size):
-            reason = _reason(float(value[i]), float(error[i]), p.low, p.high, null)
+            if together and i < 2:
+                reason = horizontal or _reason(float(value[i]), float(error[i]), p.low, p.high, None)
+            else:
+                reason = _reason(float(value[i]), float(error[i]), p.low, p.high, null)
             if reason is None:
                 continue
             index = i if p.size > 1 else None

@@ -81,8 +81,9 @@ def test_undetermined_parameters_never_reach_the_model():
     # drag along body y at its bound with a standard error of 148 N s/m: not written, nulled
     assert kept[0].values["D"] == pytest.approx([0.25, 0.0, 0.1])
     assert math.isnan(kept_std[0]["D"][1])
-    # the force's y entry is within its noise: nulled; its z entry is exactly zero: nulled
-    assert kept[1].values["F"] == pytest.approx([0.3, 0.0, 0.0])
+    # the force's y entry is within its noise, but its horizontal part is determined as a whole, so it is kept; its
+    # z entry (judged alone) is exactly zero: nulled
+    assert kept[1].values["F"] == pytest.approx([0.3, -0.01, 0.0])
     # a thrust scale whose interval holds 1 is left out
     assert [e.name for e in kept] == ["linear_drag", "constant_force"]
     labels = {(c["effect"], c["parameter"]): c for c in cases}
@@ -91,6 +92,24 @@ def test_undetermined_parameters_never_reach_the_model():
     assert labels[("linear_drag", "D[1]")]["manoeuvre"] == "fly back and forth along body y at 1 m/s or more"
     assert labels[("thrust_scale", "scale")]["action"] == "effect left out of the model file"
     assert "climb and descend" in separating_manoeuvre("constant_force", "thrust_scale")
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 35.0, 127.3, -90.0])
+def test_a_world_vector_is_determined_alike_in_a_frame_turned_about_the_vertical(yaw_deg):
+    """A steady force of 0.47 N along y and 0.04 N along x (0.03 N standard errors), and a faint horizontal wind: the
+    same horizontal parts are kept or nulled whichever way the log's frame is turned. Judged one by one, the force's
+    x (unturned) or y (turned -90 degrees) would be nulled and the wind's y turned 35 degrees (2.1 standard errors)
+    kept. The vertical is judged alone."""
+    turn = Rotation.from_euler("z", yaw_deg, degrees=True).as_matrix()
+    force = make_effect("constant_force", F=turn @ [0.04, 0.47, -0.05])
+    faint = make_effect("quadratic_drag", C=[0.1, 0.1, 0.1], w=turn @ [0.04, 0.05, 1.0], wind=True)
+    stds = [{"F": [0.03, 0.03, 0.03]}, {"C": [0.01, 0.01, 0.01], "w": [0.03, 0.03, 0.1]}]
+    kept, _, cases = determined([force, faint], stds)
+    assert kept[0].values["F"] == pytest.approx(turn @ [0.04, 0.47, 0.0])  # F[2]: -0.05 +- 0.059, nulled
+    assert kept[1].values["w"] == pytest.approx([0.0, 0.0, 1.0])  # (0.04, 0.05): 4.6 <= 5.99, both nulled
+    nulled = sorted(c["parameter"] for c in cases)
+    assert nulled == ["F[2]", "w[0]", "w[1]"]
+    assert all("x and y together" in c["reason"] for c in cases if c["parameter"] != "F[2]")
 
 
 def test_parameters_pinned_only_loosely_are_named_with_the_manoeuvre_that_narrows_them():

@@ -34,6 +34,9 @@ class Parameter:
     low: float
     high: float
     description: str
+    #: "world" for a vector along the world axes (a steady force, a wind): its horizontal components turn with the
+    #: frame the log is written in, so discovery judges them together (:mod:`discovery.determination`)
+    frame: str = ""
 
     @property
     def size(self) -> int:

@@ -18,7 +18,7 @@ import casadi as ca
 
 from wall_env.effects.base import Effect, FlightContext, Parameter, Wrench
 
-WIND = Parameter("w", "m/s", (0.0, 0.0, 0.0), -30.0, 30.0, "steady wind velocity along world x, y, z")
+WIND = Parameter("w", "m/s", (0.0, 0.0, 0.0), -30.0, 30.0, "steady wind velocity along world x, y, z", "world")
 
 
 def _body_velocity(ctx: FlightContext, theta: dict[str, ca.SX]) -> ca.SX:
