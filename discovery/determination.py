@@ -67,14 +67,20 @@ MANOEUVRES = {
 
 def loose_parameters(effects: list[Effect], stds: list[dict]) -> list[dict]:
     """Determined parameters the flight pins only loosely: each entry whose 95 % interval's half-width is more than
-    :data:`NARROW_INTERVAL_SHARE` of the parameter's size (its value, or a vector's length), as ``{"effect",
-    "parameter", "value", "std", "interval_95_share", "manoeuvre"}``. A hold at one height, for instance, pins a
-    ground effect's gain there and only loosely how it splits between the radius and the distance offset."""
+    :data:`NARROW_INTERVAL_SHARE` of the parameter's size, as ``{"effect", "parameter", "value", "std",
+    "interval_95_share", "manoeuvre"}``. The size is the value; a vector's length for a vector along the world axes
+    (a force, a wind: its direction is the frame's); each entry's own value for one coefficient per body axis
+    (:attr:`~wall_env.effects.base.Parameter.frame` ``"body"``: a drag along body z is its own quantity, and
+    measured against the drag vector's length a vertical drag of 0.44 +- 0.026 N s/m, +-12 %, passed as +-10 %). A
+    hold at one height, for instance, pins a ground effect's gain there and only loosely how it splits between the
+    radius and the distance offset."""
     out = []
     for effect, p, value, error in _entries(effects, stds):
-        size = float(np.linalg.norm(value))
-        for i in range(value.size if size > 0.0 else 0):
-            share = Z_95 * float(error[i]) / size
+        sizes = np.abs(value) if p.frame == "body" else np.full(value.size, float(np.linalg.norm(value)))
+        for i in range(value.size):
+            if sizes[i] <= 0.0:
+                continue
+            share = Z_95 * float(error[i]) / float(sizes[i])
             if np.isfinite(share) and share > NARROW_INTERVAL_SHARE:
                 index = i if p.size > 1 else None
                 out.append({"effect": effect.name, "parameter": p.name if index is None else f"{p.name}[{i}]",

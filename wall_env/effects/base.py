@@ -35,7 +35,9 @@ class Parameter:
     high: float
     description: str
     #: "world" for a vector along the world axes (a steady force, a wind): its horizontal components turn with the
-    #: frame the log is written in, so discovery judges them together (:mod:`discovery.determination`)
+    #: frame the log is written in, so discovery judges them together; "body" for one coefficient per body axis (a
+    #: drag), each its own quantity, whose spread discovery measures against that coefficient
+    #: (:mod:`discovery.determination`)
     frame: str = ""
 
     @property

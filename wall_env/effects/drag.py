@@ -31,7 +31,7 @@ class LinearDrag(Effect):
     name = "linear_drag"
     description = "body-frame drag proportional to velocity"
     reference = "Yang et al., Wall Inspector, Eq. 4"
-    parameters = (Parameter("D", "N s/m", (0.3, 0.3, 0.2), 0.0, 20.0, "drag coefficients along body x, y, z"),)
+    parameters = (Parameter("D", "N s/m", (0.3, 0.3, 0.2), 0.0, 20.0, "drag coefficients along body x, y, z", "body"),)
     options = {"wind": False}
     optional_parameters = {"wind": (WIND,)}
 
@@ -45,7 +45,7 @@ class QuadraticDrag(Effect):
     description = "body-frame drag proportional to velocity squared"
     reference = "standard bluff-body drag, F = -C |v| v per body axis"
     parameters = (
-        Parameter("C", "N s^2/m^2", (0.05, 0.05, 0.05), 0.0, 20.0, "quadratic drag coefficients along body x, y, z"),
+        Parameter("C", "N s^2/m^2", (0.05, 0.05, 0.05), 0.0, 20.0, "quadratic drag coefficients along body x, y, z", "body"),
     )
     options = {"wind": False}
     optional_parameters = {"wind": (WIND,)}
