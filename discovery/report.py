@@ -98,7 +98,8 @@ from typing import Any
 
 import numpy as np
 
-from discovery.determination import loose_parameters, separating_manoeuvre
+from discovery.determination import MANOEUVRES, loose_parameters, separating_manoeuvre
+from discovery.motor_lag import LAG_KEY
 from discovery.selection import MIN_SHARE, MIN_WEIGHT_SHARE
 
 __all__ = ["build_report", "write_report", "format_summary"]
@@ -168,7 +169,7 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "vehicle_fields": found.model_.vehicle_fields,
         "wall_edge": found.wall_edge_,
         "form_range": found.form_range_,
-        "loose": loose_parameters(found.effects_, found.param_std_),
+        "loose": _loose(found),
         "left_out": found.left_out_,
         "flights": found.flights_,
         "closed_loop": closed_loop,
@@ -180,6 +181,17 @@ def build_report(found, model_path: str | None = None, closed_loop: dict | None 
         "details": details,
     }
     return _clean(report)
+
+
+def _loose(found) -> list[dict[str, Any]]:
+    """The written parameters pinned only loosely; one whose error a found motor lag widened
+    (``found.widened_by_lag_``) moves with the lag, so the manoeuvre given is the one that pins the lag."""
+    loose = loose_parameters(found.effects_, found.param_std_)
+    for entry in loose:
+        if (entry["effect"], entry["parameter"]) in getattr(found, "widened_by_lag_", set()):
+            entry["manoeuvre"] = (f"{MANOEUVRES[(LAG_KEY, 'time_constant')]} (it moves with the motor lag found, "
+                                  "which that pins)")
+    return loose
 
 
 def _logs(found) -> list[dict[str, Any]]:

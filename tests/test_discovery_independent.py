@@ -85,6 +85,15 @@ def test_a_motor_lag_from_another_simulator_is_found_and_leaves_the_vertical_dra
     std, known = found.param_std_[0]["D"], given.param_std_[0]["D"]
     assert known[2] < 0.5 * carried <= 0.5 * std[2]
     assert std == pytest.approx(np.fmax(known, lag["effect_std"]["linear_drag"]["D"]), rel=0.05)
+    assert ("linear_drag", "D[2]") in found.widened_by_lag_ and not given.widened_by_lag_
+    # loose for that reason, the vertical drag is pinned by the manoeuvre that pins the lag
+    from types import SimpleNamespace
+
+    from discovery.report import _loose
+    looser = SimpleNamespace(effects_=found.effects_, param_std_=[{"D": [std[0], std[1], 0.2 * D[2]]}],
+                             widened_by_lag_=found.widened_by_lag_)
+    (entry,) = [x for x in _loose(looser) if x["parameter"] == "D[2]"]
+    assert entry["manoeuvre"].startswith("climb and descend in steps of different lengths")
     # the same flight without the lag: nothing is taken for one
     rows = fly({"linear_drag": D}, centre=(1.5, 0.0, 1.0), amplitude=(1.0, 1.0, 0.4), period=(5.0, 6.0, 3.0),
                duration=62.0, rate_hz=100.0, seed=5)[200:]
