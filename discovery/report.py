@@ -188,7 +188,7 @@ def _loose(found) -> list[dict[str, Any]]:
     (``found.widened_by_lag_``) moves with the lag, so the manoeuvre given is the one that pins the lag."""
     loose = loose_parameters(found.effects_, found.param_std_)
     for entry in loose:
-        if (entry["effect"], entry["parameter"]) in getattr(found, "widened_by_lag_", set()):
+        if (entry["effect"], entry["parameter"]) in found.widened_by_lag_:
             entry["manoeuvre"] = (f"{MANOEUVRES[(LAG_KEY, 'time_constant')]} (it moves with the motor lag found, "
                                   "which that pins)")
     return loose

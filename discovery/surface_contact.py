@@ -169,17 +169,10 @@ def _half_window(log: FlightLog) -> int:
     return max(1, int(round(STRIKE_WINDOW_S / float(np.median(np.diff(log.t))) / 2)))
 
 
-def _was_approaching(log: FlightLog, normal: np.ndarray, i: int, jolt: float, half: int, dt: float) -> bool:
-    """Whether the vehicle came at the surface before the jolt at sample ``i``: over the window before the jolt's
-    own, its mean speed toward the surface is at least :data:`APPROACH_SHARE` of the speed the jolt took away
-    (``jolt`` times its window). A glitch in the velocity estimate, or a hold's noise, jolts a vehicle that was not
-    moving. ``dt``: the log's median period."""
-    return _approach_speed(log, normal, i, half) >= APPROACH_SHARE * jolt * 2 * half * dt
-
-
 def _approach_speed(log: FlightLog, normal: np.ndarray, i: int, half: int) -> float:
     """The mean speed (m/s) toward the surface over the window before the jolt's own at sample ``i`` (negative:
-    away from it)."""
+    away from it). A strike follows an approach of at least :data:`APPROACH_SHARE` of the speed its jolt took away;
+    a glitch in the velocity estimate, or a hold's noise, jolts a vehicle that was not moving."""
     before = log.v_world[max(0, i - 3 * half):max(1, i - half), :] @ normal
     return float(-before.mean())
 
@@ -362,20 +355,17 @@ def _strikes_on(log: FlightLog, surface: str, effect: str | None, normal: np.nda
         return None
     centre = float(np.median(jolt[finite]))
     scatter = max(SCATTER_FLOOR, 1.4826 * float(np.median(np.abs(jolt[finite] - centre))))
-    jolted = finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter) & candidates
-
-    def hits_within(give: float) -> np.ndarray:
-        hits = np.flatnonzero(jolted & (distance < closest + give))
-        return hits[[_was_approaching(log, normal, int(i), float(jolt[i]), half, dt) for i in hits]]
-
+    jolted = np.flatnonzero(finite & (np.where(finite, jolt, 0.0) > centre + STRIKE_Z * scatter) & candidates)
+    speeds = np.array([_approach_speed(log, normal, int(i), half) for i in jolted])
+    came_at_it = speeds >= APPROACH_SHARE * jolt[jolted] * 2 * half * dt  # the jump's speed: jolt times its window
+    jolted, speeds = jolted[came_at_it], speeds[came_at_it]
     # a guard gives more the faster it strikes: the strikes at the closest approach are the fastest, and a slower
     # one stopped short of them by up to what they gave (stopped within STRIKE_WINDOW_S, at most half their speed
     # times that: 4 cm between strikes at 5 and 0.3 m/s on a 3000 N/m guard)
-    hits = near = hits_within(SAME_DISTANCE)
-    give = SAME_DISTANCE + 0.5 * STRIKE_WINDOW_S * max((_approach_speed(log, normal, int(i), half) for i in hits),
-                                                       default=0.0)
-    if give > SAME_DISTANCE:
-        hits = hits_within(give)
+    at_closest = distance[jolted] < closest + SAME_DISTANCE
+    near = jolted[at_closest]
+    give = SAME_DISTANCE + 0.5 * STRIKE_WINDOW_S * max(speeds[at_closest], default=0.0)
+    hits = jolted[distance[jolted] < closest + give]
     strikes: list[list[int]] = []
     for i in hits:
         if strikes and log.t[i] - log.t[strikes[-1][-1]] <= STRIKE_SEPARATION_S:

@@ -1096,10 +1096,9 @@ def _with_lag_uncertainty(name: str, std: dict, beside_lag: dict[str, dict]) -> 
     """An effect's standard errors ``std`` fitted with a found motor lag taken as the vehicle's, each at least the one
     it had fitted beside the lag (``beside_lag``: per effect name, :func:`discovery.selection._motor_lag`'s
     ``effect_std``), and the entries (``D[2]``) whose error that widened by more than sqrt 2 (the lag's share of
-    their variance more than the rest's). Taken as known, the lag's own uncertainty is
-    not in ``std``: on a climb and descent a vertical drag moves with the lag (0.30 N s/m for 35 ms), and a 5 ms error
-    in the lag, 1.6 of its standard errors, put the drag 10 % off with a standard error of 1.4 % (the second
-    simulator, a 2 kg vehicle)."""
+    their variance more than the rest's). Taken as known, the lag's own uncertainty is not in ``std``: on a climb and
+    descent a vertical drag moves with the lag (0.30 N s/m for 35 ms), and a 5 ms error in the lag, 1.6 of its
+    standard errors, put the drag 10 % off with a standard error of 1.4 % (the second simulator, a 2 kg vehicle)."""
     joint = beside_lag.get(name, {})
     out = dict(std)
     widened: list[str] = []
