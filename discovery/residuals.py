@@ -39,7 +39,6 @@ cross-validation folds (:attr:`Segment.fold`) that all held-out figures use.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
 
 import numpy as np
 
@@ -105,6 +104,9 @@ class Segment:
     measured_force: np.ndarray  # (n, 3) N, y_k: the aerodynamic force the data show
     fold: np.ndarray  # (n,) int, the cross-validation fold each sample is held out in
     train_mask: np.ndarray  # (K, n) bool, samples usable for fitting when fold k is held out
+    # (n - 1, 3) the body z axis in the world frame averaged over each step: the direction of the thrust held over
+    # the step (the measured force, the noise floor's step residual and a motor lag's force)
+    z_body_steps: np.ndarray = field(repr=False)
     thrust_logged: np.ndarray | None = field(repr=False, default=None)  # (n,) N, the log's own thrust (a command)
     p_measured: np.ndarray | None = field(repr=False, default=None)  # (n, 3) logged (unsmoothed) position
     p_start: np.ndarray | None = field(repr=False, default=None)  # (n, 3) position for prediction starts (short smoothing)
@@ -166,12 +168,6 @@ class Segment:
         if key not in self.evaluators:
             self.evaluators[key] = ForceEvaluator(model, rotor_positions_body, self.scene, self.gravity)
         return self.evaluators[key]
-
-    @cached_property
-    def z_body_steps(self) -> np.ndarray:
-        """The body z axis in the world frame averaged over each step ``(n - 1, 3)``: the direction of the thrust
-        held over the step (the measured force, the noise floor's step residual and a motor lag's force)."""
-        return step_average_samples(self.states.R_body_to_world[:, :, 2])
 
     def smooth_force(self, force_samples: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
         """``K[F]``: matched smoothing of per-sample forces ``(n, 3, ...)`` (only at ``rows`` if given)."""
@@ -319,7 +315,8 @@ def prepare(logs: list[FlightLog], *, window_s: float = DEFAULT_WINDOW_S, order:
                 accel_term = m * kernel.step_average(a_steps)
             else:
                 accel_term = m * kernel.derivative(v_raw)
-            thrust_steps = thrust[:-1, None] * step_average_samples(R[:, :, 2])  # command held over each step
+            z_body_steps = step_average_samples(R[:, :, 2])
+            thrust_steps = thrust[:-1, None] * z_body_steps  # command held over each step
             measured = accel_term + m * log.gravity * e3 - kernel.step_average(thrust_steps)
             state_kernel = LocalPolynomial(t, min(STATE_WINDOW_S, window_s), order)
             states = SampleStates(state_kernel.smooth(log.p_world[part]), R, state_kernel.smooth(v_raw),
@@ -329,8 +326,8 @@ def prepare(logs: list[FlightLog], *, window_s: float = DEFAULT_WINDOW_S, order:
             # prediction starts need the state at one instant: a short window keeps the lag of a 1 s fit out
             short = LocalPolynomial(t, min(START_WINDOW_S, window_s), order)
             segments.append(Segment(index, log.source, t, states, thrust, log.omega_cmd_body[part], kernel,
-                                    log.scene, log.gravity, measured, fold, train, logged, log.p_world[part],
-                                    short.smooth(log.p_world[part]), short.smooth(v_raw),
+                                    log.scene, log.gravity, measured, fold, train, z_body_steps, logged,
+                                    log.p_world[part], short.smooth(log.p_world[part]), short.smooth(v_raw),
                                     None if log.a_world is not None else v_raw, a_steps, averaged))
     if not segments:
         raise ValueError("no log has a segment long enough to differentiate")
