@@ -83,7 +83,7 @@ def loose_parameters(effects: list[Effect], stds: list[dict]) -> list[dict]:
             share = Z_95 * float(error[i]) / float(sizes[i])
             if np.isfinite(share) and share > NARROW_INTERVAL_SHARE:
                 index = i if p.size > 1 else None
-                out.append({"effect": effect.name, "parameter": p.name if index is None else f"{p.name}[{i}]",
+                out.append({"effect": effect.name, "parameter": p.entry_name(i),
                             "value": float(value[i]), "std": float(error[i]), "interval_95_share": share,
                             "manoeuvre": determining_manoeuvre(effect.name, p.name, index)})
     return out
@@ -163,7 +163,7 @@ def undetermined_cases(effects: list[Effect], stds: list[dict]) -> list[Undeterm
             index = i if p.size > 1 else None
             nullable = p.size > 1 or p.name == "offset"
             cases.append(Undetermined(
-                effect=effect.name, parameter=p.name if index is None else f"{p.name}[{i}]", name=p.name,
+                effect=effect.name, parameter=p.entry_name(i), name=p.name,
                 index=index, value=float(value[i]), std=float(error[i]), reason=reason,
                 action=f"set to {null or 0.0:g} in the model file" if nullable else "effect left out of the model file",
                 manoeuvre=determining_manoeuvre(effect.name, p.name, index)))

@@ -278,7 +278,7 @@ def test_effect(fitter: Fitter, final: Candidate, index: int, structures: list[S
             e = float(error[j]) if j < error.size else float("nan")
             material = abs(x) >= PROXY_SHARE * largest * 2  # a vector's small entries move by their noise
             if material and x != 0 and abs(y - x) > PROXY_SHARE * abs(x) and np.isfinite(e) and abs(y - x) > 2 * e:
-                proxies.append({"effect": effect.name, "parameter": p.name if p.size == 1 else f"{p.name}[{j}]",
+                proxies.append({"effect": effect.name, "parameter": p.entry_name(j),
                                 "without": float(x), "with": float(y), "std": e, "lives_in": _describe(where)})
     return None, proxies
 

@@ -553,7 +553,7 @@ class Discovery:
         # entries whose standard error is the one fitted beside a found lag: what widens them is the lag
         self.widened_by_lag_: set[tuple[str, str]] = set()
         if lag is not None and lag["kept"]:
-            widened = [_with_lag_uncertainty(e.name, std, lag["effect_std"]) for e, std in zip(fitted, self.param_std_)]
+            widened = [_with_lag_uncertainty(e, std, lag["effect_std"]) for e, std in zip(fitted, self.param_std_)]
             self.param_std_ = [std for std, _ in widened]
             self.widened_by_lag_ = {(e.name, label) for e, (_, labels) in zip(fitted, widened) for label in labels}
         written, self.written_notes_ = written_effects([plain_wall(e) for e in self.effects_])
@@ -1092,14 +1092,15 @@ class Discovery:
         return f"Discovery(found={self.names_}, gap_before={self.gap_before_}, gap_after={self.gap_after_})"
 
 
-def _with_lag_uncertainty(name: str, std: dict, beside_lag: dict[str, dict]) -> tuple[dict, list[str]]:
+def _with_lag_uncertainty(effect: Effect, std: dict, beside_lag: dict[str, dict]) -> tuple[dict, list[str]]:
     """An effect's standard errors ``std`` fitted with a found motor lag taken as the vehicle's, each at least the one
     it had fitted beside the lag (``beside_lag``: per effect name, :func:`discovery.selection._motor_lag`'s
     ``effect_std``), and the entries (``D[2]``) whose error that widened by more than sqrt 2 (the lag's share of
     their variance more than the rest's). Taken as known, the lag's own uncertainty is not in ``std``: on a climb and
     descent a vertical drag moves with the lag (0.30 N s/m for 35 ms), and a 5 ms error in the lag, 1.6 of its
     standard errors, put the drag 10 % off with a standard error of 1.4 % (the second simulator, a 2 kg vehicle)."""
-    joint = beside_lag.get(name, {})
+    joint = beside_lag.get(effect.name, {})
+    parameters = {p.name: p for p in effect.parameters}
     out = dict(std)
     widened: list[str] = []
     for key, value in std.items():
@@ -1111,7 +1112,7 @@ def _with_lag_uncertainty(name: str, std: dict, beside_lag: dict[str, dict]) -> 
         out[key] = wider.tolist() if np.ndim(wider) else float(wider)
         # the lag's share of the variance more than the rest's
         mostly = np.atleast_1d(wider > np.sqrt(2.0) * own)
-        widened += [key if np.ndim(wider) == 0 else f"{key}[{i}]" for i in np.flatnonzero(mostly)]
+        widened += [parameters[key].entry_name(int(i)) for i in np.flatnonzero(mostly)]
     return out, widened
 
 

@@ -44,6 +44,10 @@ class Parameter:
     def size(self) -> int:
         return len(self.default) if isinstance(self.default, tuple) else 1
 
+    def entry_name(self, index: int) -> str:
+        """How reports name entry ``index``: ``D[2]`` of a vector, the bare name of a scalar."""
+        return self.name if self.size == 1 else f"{self.name}[{index}]"
+
     def validate(self, effect: str, value: Any) -> np.ndarray:
         try:
             array = np.asarray(value, dtype=float).reshape(-1)
