@@ -52,6 +52,10 @@ CEILING_CLOSE = {"centre": (1.5, 0.0, CEILING_Z - 0.105), "amplitude": (0.6, 0.6
 TALL_WALL = {"centre": (0.25, 0.0, 1.2), "amplitude": (0.09, 0.5, 0.45), "period": (7.0, 9.0, 5.0), "gains": NEAR_WALL}
 TALL = {"centre": (1.5, 0.0, 1.2), "amplitude": (1.0, 1.0, 0.5), "period": (5.0, 6.0, 6.0)}
 RATES = (100.0, 50.0, 200.0)
+#: where the finite wall ends: 1.2 m up (the survey spans 0.75-1.65 m), or with ``--wall-end side`` 0.15 m along the
+#: wall (y; the survey spans -0.5 to 0.5 m)
+WALL_ENDS = {"top": {"wall_top": 1.2}, "side": {"wall_side": 0.15}}
+WALL_END = WALL_ENDS["top"]
 _REACH = independent_sim.reach_toward_wall()  # m: the default layout's
 WEIGHT = MASS * GRAVITY
 #: parameters in the world's frame: turned back from the log's frame to be judged (the drags' coefficients are in
@@ -113,7 +117,7 @@ def cases(seed: int) -> list[Case]:
              {"constant_force": {"F": wind}}, {"wall": False}, unexplained="time"),
         Case("turbulence", {"turbulence": ([u(0.35, 0.5), u(0.35, 0.5), u(0.25, 0.35)], 2.0)}, OPEN, {},
              {"wall": False}, unexplained="time"),
-        Case("finite_wall", {"suction": (k_s, d_thr), "wall_top": 1.2}, TALL_WALL,
+        Case("finite_wall", {"suction": (k_s, d_thr), **WALL_END}, TALL_WALL,
              {"wall_suction": {"k_s": k_s, "d_thr": d_thr}}, says=("wall 0 seems to end",)),
         Case("height_force", {"height_force": u(0.6, 0.9)}, TALL, {}, {"wall": False}, unexplained="height"),
         Case("ground_contact", {"linear_drag": D}, OPEN, {"linear_drag": {"D": D}}, {"wall": False}, takeoff=True,
@@ -326,6 +330,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="in worlds whose scene has a wall, a second wall this far (m) from it, facing it, with the "
                              "same suction")
     parser.add_argument("--accelerometer", action="store_true", help="the logs have ax, ay, az too")
+    parser.add_argument("--wall-end", choices=sorted(WALL_ENDS), default="top",
+                        help="where the finite wall ends: at its top (default) or at its side")
     parser.add_argument("--noise", type=float, default=1.0, help="measurement noise times this (default 1)")
     args = parser.parse_args(argv)
     if not 0.25 < args.gain_floor < 5.0:  # at a quarter of the radius the image-rotor gain is infinite
@@ -345,7 +351,8 @@ def main(argv: list[str] | None = None) -> int:
     shift = tuple(float(x) for x in args.shift.split(","))
     if len(shift) != 2:
         parser.error(f"--shift must be two numbers x,y, got {args.shift!r}")
-    global WEIGHT
+    global WEIGHT, WALL_END
+    WALL_END = WALL_ENDS[args.wall_end]
     independent_sim.WORLD_TURN, independent_sim.WORLD_SHIFT = math.radians(args.turn), shift
     independent_sim.NOISE_SCALE, independent_sim.ACCELEROMETER = args.noise, args.accelerometer
     independent_sim.SECOND_WALL_X = args.corridor

@@ -69,7 +69,7 @@ GAIN_FLOOR_RADII = 0.6
 WORLD_TURN = 0.0
 WORLD_SHIFT = (0.0, 0.0)
 #: with a number, a second wall at x = SECOND_WALL_X facing -x (a corridor): the same suction as the first (and
-#: ending at the same ``wall_top``), in the sidecar too wherever the first wall is
+#: ending where it ends), in the sidecar too wherever the first wall is
 SECOND_WALL_X: float | None = None
 #: the measurement noise's standard deviations (position 1 mm, velocity 1 cm/s, attitude 1 mrad, rates 5 mrad/s,
 #: acceleration 0.1 m/s^2) times this
@@ -113,12 +113,18 @@ def _image_gain(radius: float, distance: float, offset: float) -> float:
     return 1.0 / (1.0 - (radius / (4.0 * d)) ** 2)
 
 
+def _on_wall(effects: dict, at: np.ndarray) -> bool:
+    """Whether the point ``at`` faces the wall: below its ``wall_top`` and short of its ``wall_side`` (y)."""
+    return bool(at[2] <= effects.get("wall_top", math.inf) and at[1] <= effects.get("wall_side", math.inf))
+
+
 def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: float = 0.0,
                  produced: float = 0.0) -> np.ndarray:
     """World force (N) of ``effects`` besides the thrust map:
 
     ``suction`` (k_s, d_thr) of a wall at x = 0 with normal +x (``wall_top``: the wall ends at that height, a rotor
-    above it feels nothing), and of a second one facing it at :data:`SECOND_WALL_X` when there is one;
+    above it feels nothing; ``wall_side``: it ends at that y, a rotor beyond it feels nothing), and of a second one
+    facing it at :data:`SECOND_WALL_X` when there is one;
     ``wind_force`` (3,); ``gust`` (amplitude (3,), frequency Hz): a periodic force; ``quadratic_drag`` (C (3,), wind
     (3,)); ``linear_drag`` (D (3,), body axes); ``height_force`` k (N/m): ``-k z`` along world z, growing with
     height; ``ground`` (radius, offset) and ``ceiling`` (radius, offset): the image-rotor gain of each rotor's share
@@ -126,10 +132,9 @@ def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: 
     force = np.zeros(3)
     if "suction" in effects:
         k_s, d_thr = effects["suction"]
-        top = effects.get("wall_top", math.inf)
         for rotor in ROTORS_BODY:
             at = p + R @ rotor
-            if at[2] <= top:
+            if _on_wall(effects, at):
                 force[0] -= k_s * max(0.0, d_thr - max(at[0], 0.0))
                 if SECOND_WALL_X is not None:
                     force[0] += k_s * max(0.0, d_thr - max(SECOND_WALL_X - at[0], 0.0))
@@ -185,8 +190,8 @@ def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, d
         force = force + _pressed_surface(REST_HEIGHT - p[2], v, axis=2, away=1.0)
     rotors_world = [p + R @ rotor for rotor in ROTORS_BODY]
     if WALL_GUARD_RADIUS is not None:
-        top = effects.get("wall_top", math.inf)  # a rotor above a wall's top passes over it
-        depth = WALL_GUARD_RADIUS - min((at[0] for at in rotors_world if at[2] <= top), default=math.inf)
+        # a rotor above a wall's top or beyond its side passes it
+        depth = WALL_GUARD_RADIUS - min((at[0] for at in rotors_world if _on_wall(effects, at)), default=math.inf)
         force = force + _pressed_surface(depth, v, axis=0, away=1.0)
     if CEILING_GUARD_RADIUS is not None and "ceiling" in effects:
         depth = CEILING_GUARD_RADIUS - min(CEILING_Z - at[2] for at in rotors_world)
