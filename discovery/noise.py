@@ -28,7 +28,7 @@ from scipy.optimize import nnls
 
 from discovery.residuals import FlightData, Segment, step_average_samples
 
-__all__ = ["BAND_HZ", "SLOW_HZ", "FLOOR_FACTOR", "step_residual", "noise_floor", "residual_spectrum"]
+__all__ = ["BAND_HZ", "SLOW_HZ", "FLOOR_FACTOR", "step_residual", "noise_floor", "judged_floor", "residual_spectrum"]
 
 BAND_HZ = 2.0  # Hz: above this the per-step residual is noise (manoeuvres and effects live below ~1 Hz)
 SLOW_HZ = 0.5  # Hz: a residual varying below this varies over seconds (a changing wind, a gust)
@@ -36,6 +36,8 @@ SLOW_HZ = 0.5  # Hz: a residual varying below this varies over seconds (a changi
 FLOOR_FACTOR = 1.5
 _WELCH_S = 2.56  # s per Welch segment of the per-step residual (0.4 Hz resolution)
 _SPECTRUM_S = 20.0  # s per Welch segment of the smoothed residual (0.05 Hz resolution)
+JACKKNIFE_GROUPS = 8  # groups of Welch segments the floor's spread is taken over (leaving out one at a time)
+Z_UPPER_95 = 1.645  # standard normal quantile of a one-sided 95 % bound
 
 
 def step_residual(seg: Segment) -> np.ndarray:
@@ -58,16 +60,23 @@ def step_residual(seg: Segment) -> np.ndarray:
     return mass * np.diff(seg.v_raw, axis=0) / seg.dt + weight_less_thrust * stretch - slow * (stretch - 1.0)
 
 
-def _welch(x: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
-    """Two-sided power per cycle per step of the columns of ``x`` ``(n, d)`` at ``length // 2 + 1`` frequencies
-    (Hann-windowed, half-overlapping segments): ``(nu, (f, d))``; a mean over ``nu`` equals the variance."""
+def _periodograms(x: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two-sided power per cycle per step of the columns of ``x`` ``(n, d)`` at ``length // 2 + 1`` frequencies,
+    one periodogram per Hann-windowed, half-overlapping segment, in time order: ``(nu, (k, f, d))``."""
     length = min(length, len(x))
     window = np.hanning(length)
     norm = float(np.sum(window**2))
     starts = range(0, len(x) - length + 1, max(1, length // 2))
     powers = [np.abs(np.fft.rfft((x[s:s + length] - x[s:s + length].mean(axis=0)) * window[:, None], axis=0)) ** 2
               / norm for s in starts]
-    return np.fft.rfftfreq(length), np.mean(powers, axis=0)
+    return np.fft.rfftfreq(length), np.asarray(powers)
+
+
+def _welch(x: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
+    """Welch's estimate: the mean of :func:`_periodograms`, ``(nu, (f, d))``; a mean over ``nu`` equals the
+    variance."""
+    nu, powers = _periodograms(x, length)
+    return nu, powers.mean(axis=0)
 
 
 def _white_shape(nu: np.ndarray, averaged: bool) -> np.ndarray:
@@ -92,6 +101,11 @@ def _fit_levels(nu: np.ndarray, power: np.ndarray, rounds: int = 5, averaged: bo
         model = np.maximum(design @ levels, 1e-12 * top)
         levels = nnls(design / model[:, None], power / model)[0]
     return levels
+
+
+def _axes_levels(nu: np.ndarray, power: np.ndarray, averaged: bool) -> np.ndarray:
+    """:func:`_fit_levels` of each world axis of ``power`` ``(f, 3)``: ``(3, 2)``, A and B per axis."""
+    return np.array([_fit_levels(nu, power[:, a], averaged=averaged) for a in range(3)])
 
 
 def _refine_peak(data: FlightData, residual: np.ndarray, peak_hz: float, resolution_hz: float) -> float:
@@ -122,36 +136,59 @@ def _kernel_gains(seg: Segment) -> tuple[float, float]:
 def noise_floor(data: FlightData) -> dict:
     """The rms force residual (N) that measurement noise and unlogged disturbances leave after smoothing.
 
-    Returns ``{"floor_N", "floor_axes_N", "white_N2", "differenced_N2", "band_hz"}``: the floor over all three
-    axes (vector norm) and per world axis, and the fitted white and differenced-white levels (N^2 per step,
-    per axis, averaged over segments weighted by their samples). ``floor_N`` is NaN when no segment is long
-    enough or its rate too low to have a band above :data:`BAND_HZ`."""
-    floors, weights, whites, differenced = [], [], [], []
+    Returns ``{"floor_N", "floor_axes_N", "floor_upper_N", "white_N2", "differenced_N2", "band_hz"}``: the floor
+    over all three axes (vector norm) and per world axis, its one-sided 95 % upper bound, and the fitted white and
+    differenced-white levels (N^2 per step, per axis, averaged over segments weighted by their samples).
+    ``floor_N`` is NaN when no segment is long enough or its rate too low to have a band above :data:`BAND_HZ`.
+
+    The upper bound is what a residual is judged against (:func:`discovery.unexplained.is_unexplained`): the
+    white level shows only where the differenced one has not yet risen, the low end of the band, and where the
+    velocity's noise is large it is hardly determined. On a 100 Hz log with 1.5 cm/s of velocity noise and a white
+    level of 0.0125 N^2 per step, the level came out 0.010 +- 0.009 N^2 over 40 draws of the noise (zero in some),
+    and the floor of the second simulator's clean log at half its residual. The floor's spread is taken from the
+    log itself, a grouped jackknife over its Welch segments (:data:`JACKKNIFE_GROUPS` groups, in time order)."""
+    floors, weights, whites, differenced, variances = [], [], [], [], []
     for seg in data.segments:
         dt = seg.dt
         length = max(64, int(round(_WELCH_S / dt)))
         if seg.n < length:
             continue
-        nu, power = _welch(step_residual(seg), length)
+        nu, powers = _periodograms(step_residual(seg), length)
         band = nu >= BAND_HZ * dt
         if band.sum() < 4:
             continue
-        levels = np.array([_fit_levels(nu[band], power[band, a], averaged=seg.a_steps_averaged)
-                           for a in range(3)])  # (3, 2): A, B per axis
         sum_w2, sum_dw2 = _kernel_gains(seg)
+        levels = _axes_levels(nu[band], powers.mean(axis=0)[band], seg.a_steps_averaged)
         floors.append(levels[:, 0] * sum_w2 + levels[:, 1] * sum_dw2)
+        groups = np.array_split(np.arange(len(powers)), min(JACKKNIFE_GROUPS, len(powers)))
+        if len(groups) > 1:
+            totals = np.array([np.sum(_axes_levels(nu[band], np.delete(powers, g, axis=0).mean(axis=0)[band],
+                                                   seg.a_steps_averaged) @ [sum_w2, sum_dw2]) for g in groups])
+            variances.append((len(groups) - 1) / len(groups) * float(np.sum((totals - totals.mean()) ** 2)))
+        else:  # one spectrum segment (a stretch of a few seconds): its floor taken as known only to its own size
+            variances.append(float(np.sum(floors[-1])) ** 2)
         whites.append(levels[:, 0])
         differenced.append(levels[:, 1])
         weights.append(seg.n)
     if not floors:
         nan = float("nan")
-        return {"floor_N": nan, "floor_axes_N": [nan] * 3, "white_N2": [nan] * 3, "differenced_N2": [nan] * 3,
-                "band_hz": BAND_HZ}
+        return {"floor_N": nan, "floor_axes_N": [nan] * 3, "floor_upper_N": nan, "white_N2": [nan] * 3,
+                "differenced_N2": [nan] * 3, "band_hz": BAND_HZ}
     w = np.asarray(weights, dtype=float) / float(np.sum(weights))
     axes = np.sqrt(np.asarray(floors).T @ w)
-    return {"floor_N": float(np.sqrt(np.sum(axes**2))), "floor_axes_N": [float(a) for a in axes],
+    square = float(np.sum(axes**2))
+    spread = float(np.sqrt(np.asarray(variances) @ w**2))
+    return {"floor_N": float(np.sqrt(square)), "floor_axes_N": [float(a) for a in axes],
+            "floor_upper_N": float(np.sqrt(square + Z_UPPER_95 * spread)),
             "white_N2": [float(x) for x in np.asarray(whites).T @ w],
             "differenced_N2": [float(x) for x in np.asarray(differenced).T @ w], "band_hz": BAND_HZ}
+
+
+def judged_floor(floor: dict) -> float:
+    """The level (N) a residual is judged against: the floor's 95 % upper bound (``floor_upper_N`` of
+    :func:`noise_floor`), or the floor itself where the bound is missing; NaN when the log has no floor."""
+    upper = floor.get("floor_upper_N", float("nan"))
+    return float(upper) if np.isfinite(upper) else float(floor.get("floor_N", float("nan")))
 
 
 def residual_spectrum(data: FlightData, residual: np.ndarray, floor: dict) -> dict | None:

@@ -29,10 +29,11 @@ Keys:
 ``noise``
     the log's noise floor (:func:`discovery.noise.noise_floor`): ``floor_N``, the held-out rms
     force residual measurement noise and unlogged disturbances leave (a perfect model's), per
-    axis and the fitted noise levels.
+    axis, ``floor_upper_N``, its one-sided 95 % upper bound, and the fitted noise levels.
 ``unexplained``
     ``null`` when the held-out residual is within :data:`~discovery.noise.FLOOR_FACTOR` times the
-    noise floor (or exceeds it by less than 0.2 % of the weight) and no regressor localises it;
+    noise floor's upper bound (or exceeds it by less than 0.2 % of the weight) and no regressor
+    localises it;
     else ``{"force_rms_N", "noise_floor_N", "times_noise_floor", "excess_rms_N", "share_of_weight",
     "lives_in", "where", "shape", "position", "position_cells", "time", "direction_world"}``: how much
     is left beyond the noise and where it lives (:mod:`discovery.unexplained`): ``lives_in`` is
@@ -254,9 +255,11 @@ def format_summary(report: dict[str, Any]) -> str:
         elif report.get("unexplained"):
             lines.append("found no effect of the library that explains the residual (see UNEXPLAINED below)")
         elif noise and after is not None:
+            upper = report["noise"].get("floor_upper_N")
+            bound = f", at most {upper:.4f} N at 95 %" if upper is not None and upper > noise else ""
             lines.append(f"found nothing: the held-out force residual, {after:.4f} N rms, is "
-                         f"{after / noise:.2g} times the log's noise floor ({noise:.4f} N, measured from the log): the "
-                         "logs agree with the nominal model within noise (no candidate explains "
+                         f"{after / noise:.2g} times the log's noise floor ({noise:.4f} N{bound}, measured from the "
+                         "log): the logs agree with the nominal model within noise (no candidate explains "
                          f"{100 * MIN_SHARE:g} % of the held-out residual energy and a force of "
                          f"{100 * MIN_WEIGHT_SHARE:g} % of the weight)")
         else:

@@ -1,11 +1,12 @@
 """What a model leaves unexplained, how much, and where it lives: in time, in position or against a state.
 
 A held-out residual is *unexplained* when it is more than :data:`~discovery.noise.FLOOR_FACTOR`
-times the log's own noise floor (:func:`discovery.noise.noise_floor`) and the excess over
-the floor is at least :data:`~discovery.selection.MIN_WEIGHT_SHARE` of the weight, or when
-cross-validated bin means against a regressor predict a material share of it (a localised
-residual inside the noise). Then :func:`where_it_lives` asks three questions, each answered
-by predicting held-out folds, and names the best answer:
+times the log's own noise floor (:func:`discovery.noise.noise_floor`; its 95 % upper bound, as
+the floor is itself measured with an error) and the excess over that is at least
+:data:`~discovery.selection.MIN_WEIGHT_SHARE` of the weight, or when cross-validated bin means
+against a regressor predict a material share of it (a localised residual inside the noise).
+Then :func:`where_it_lives` asks three questions, each answered by predicting held-out folds,
+and names the best answer:
 
 - **states** (:func:`discovery.regressors.localise_residual`): bin means against one
   regressor (a distance to a surface, a velocity, the thrust) predict it: it depends on
@@ -33,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from discovery.noise import FLOOR_FACTOR, SLOW_HZ, residual_spectrum
+from discovery.noise import FLOOR_FACTOR, SLOW_HZ, judged_floor, residual_spectrum
 from discovery.regressors import Regressor, localise_residual, time_intervals
 from discovery.residuals import FlightData
 
@@ -160,8 +161,9 @@ def periodic_explained(data: FlightData, residual: np.ndarray, frequency_hz: flo
 
 
 def is_unexplained(residual_rms: float, floor: dict, weight: float, min_weight_share: float) -> bool:
-    """More than :data:`FLOOR_FACTOR` times the noise floor, by at least ``min_weight_share`` of the weight."""
-    noise = floor.get("floor_N", float("nan"))
+    """More than :data:`FLOOR_FACTOR` times the noise floor (its 95 % upper bound, :func:`~discovery.noise.judged_floor`),
+    by at least ``min_weight_share`` of the weight."""
+    noise = judged_floor(floor)
     if not np.isfinite(noise) or not np.isfinite(residual_rms):
         return False
     excess = float(np.sqrt(max(residual_rms**2 - noise**2, 0.0)))
@@ -181,7 +183,7 @@ def where_it_lives(data: FlightData, residual: np.ndarray, candidates: list[Regr
     for f in np.unique(flights):
         level[flights == f] = residual[flights == f].mean(axis=0)
     variation = residual - level
-    noise = floor.get("floor_N", float("nan"))
+    noise = judged_floor(floor)
     steady = bool(np.isfinite(noise) and _rms(variation) <= FLOOR_FACTOR * noise)
     # where the force is (its range, direction, times) is asked of the residual itself when a regressor localises
     # it there; a residual whose level swamps how it varies is asked of its variation
