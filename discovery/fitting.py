@@ -47,7 +47,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from discovery.layout import ParameterLayout
-from discovery.residuals import FlightData
+from discovery.residuals import FlightData, step_average_samples
 from wall_env.aero import AeroModel
 from wall_env.effects import Effect, make_effect
 
@@ -97,6 +97,10 @@ class Term(Protocol):
 
     def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
         """``K[F]`` ``(n, 3)`` at every sample; ``theta`` ``(size,)`` or one row per sample."""
+
+    def steps(self, segment: int, theta: np.ndarray) -> np.ndarray:
+        """``F`` averaged over each step ``(n - 1, 3)`` (unsmoothed: what the per-step residual of
+        :func:`discovery.noise.step_residual` holds of it); ``theta`` ``(size,)`` or one row per sample."""
 
     def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
         """Entries a cross-validation fold must hold at their defaults (nuisance parameters that reach
@@ -161,11 +165,16 @@ class EffectTerm:
             self._cache[segment] = cached
         return cached[1]
 
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+    def steps(self, segment: int, theta: np.ndarray) -> np.ndarray:
         seg = self.data.segments[segment]
         if not self._active[segment]:
-            return np.zeros((seg.n, 3))
-        return seg.smooth_force(self._evaluators[segment].force(seg.states, theta))
+            return np.zeros((seg.n - 1, 3))
+        force = self._evaluators[segment].force(seg.states, theta)
+        mask = self._sample_mask(segment)
+        return step_average_samples(force if mask is None else force * mask[:, None])
+
+    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+        return self.data.segments[segment].kernel.step_average(self.steps(segment, theta))
 
 
 def make_term(data: FlightData, effect: Effect) -> Term:
@@ -446,6 +455,13 @@ class EffectFit:
                     self.layout.defaults[rows]
                 out[s] -= term.smoothed(s, theta)
         return out
+
+    def steps(self, theta: np.ndarray, segment: int) -> np.ndarray:
+        """The effects' summed force over each step of ``segment`` ``(n - 1, 3)``, unsmoothed (:meth:`Term.steps`)."""
+        flight = self.data.segments[segment].flight
+        parts = self.layout.split(theta, flight)
+        return sum((term.steps(segment, parts[e]) for e, term in enumerate(self.terms)),
+                   np.zeros((self.data.segments[segment].n - 1, 3)))
 
     def forces(self, theta: np.ndarray) -> list[list[np.ndarray]]:
         """Each effect's ``K[F]`` ``(n, 3)`` at every sample, per segment: ``out[e][s]``."""

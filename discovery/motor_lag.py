@@ -160,15 +160,18 @@ class LagTerm:
         self._cache[segment] = (key, result)
         return result
 
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
-        """``K[F]`` ``(n, 3)`` at every sample (one parameter vector for the whole segment)."""
+    def steps(self, segment: int, theta: np.ndarray) -> np.ndarray:
+        """``F`` over each step ``(n - 1, 3)`` (one parameter vector for the whole segment)."""
         theta = np.asarray(theta, dtype=float)
         if theta.ndim == 2:
             if not np.all(theta == theta[:1]):
                 raise ValueError("a motor lag is evaluated with one parameter vector per segment")
             theta = theta[0]
-        force, _ = self._steps(segment, theta)
-        return self.scale * self.data.segments[segment].kernel.step_average(force)
+        return self.scale * self._steps(segment, theta)[0]
+
+    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+        """``K[F]`` ``(n, 3)`` at every sample (one parameter vector for the whole segment)."""
+        return self.data.segments[segment].kernel.step_average(self.steps(segment, theta))
 
 
 def lag_force_steps(thrust_logged: Any, t: np.ndarray, z_steps: np.ndarray, tau: float,

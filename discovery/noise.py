@@ -23,6 +23,8 @@ below :data:`SLOW_HZ` (a wind that changes over seconds).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.optimize import nnls
 
@@ -85,6 +87,25 @@ def _white_shape(nu: np.ndarray, averaged: bool) -> np.ndarray:
     return 0.5 * (1.0 + np.cos(2 * np.pi * nu)) if averaged else np.ones(len(nu))
 
 
+def _design(nu: np.ndarray, averaged: bool) -> np.ndarray:
+    """The two noise shapes at ``nu`` ``(f, 2)``: white (:func:`_white_shape`) and differenced white."""
+    return np.column_stack([_white_shape(nu, averaged), 2.0 * (1.0 - np.cos(2 * np.pi * nu))])
+
+
+def _levels_covariance(nu: np.ndarray, levels: np.ndarray, averaged: bool, periodograms: int) -> np.ndarray:
+    """Whittle's covariance ``(2, 2)`` of levels ``(A, B)`` fitted to the mean of ``periodograms`` Welch periodograms:
+    the inverse of ``K sum g g^T / S^2`` over the band, ``K`` half their number (half-overlapping Hann segments and
+    neighbouring bins are correlated: so halved, it matched the spread of the white level over draws of the noise
+    within 0.85-1.05)."""
+    design = _design(nu, averaged)
+    top = float(np.max(design @ levels))
+    if not top > 1e-200:  # no noise fitted (a noise-free log): nothing uncertain about it
+        return np.zeros((2, 2))
+    model = np.maximum(design @ levels, 1e-12 * top)
+    scaled = design / model[:, None]
+    return np.linalg.pinv(0.5 * periodograms * scaled.T @ scaled)
+
+
 def _fit_levels(nu: np.ndarray, power: np.ndarray, rounds: int = 5, averaged: bool = False) -> np.ndarray:
     """White and differenced-white levels ``(A, B) >= 0`` of a periodogram, ``S = A + B 2 (1 - cos 2 pi nu)`` (the
     white part shaped by :func:`_white_shape` when ``averaged``).
@@ -92,7 +113,7 @@ def _fit_levels(nu: np.ndarray, power: np.ndarray, rounds: int = 5, averaged: bo
     Least squares weighted by the model itself (Whittle's likelihood, as iteratively reweighted least
     squares): every bin counts by its relative error, so the white level is set where it shows (the low
     end of the band) rather than swamped by the differenced noise that grows with frequency."""
-    design = np.column_stack([_white_shape(nu, averaged), 2.0 * (1.0 - np.cos(2 * np.pi * nu))])
+    design = _design(nu, averaged)
     top = float(np.max(power)) if len(power) else 0.0
     if not np.isfinite(top) or top <= 1e-200:  # a noise-free log (synthetic): no noise to fit
         return np.zeros(2)
@@ -133,7 +154,7 @@ def _kernel_gains(seg: Segment) -> tuple[float, float]:
     return float(np.sum(white**2)), float(np.sum(np.diff(padded) ** 2))
 
 
-def noise_floor(data: FlightData) -> dict:
+def noise_floor(data: FlightData, model_steps: Callable[[int], np.ndarray] | None = None) -> dict:
     """The rms force residual (N) that measurement noise and unlogged disturbances leave after smoothing.
 
     Returns ``{"floor_N", "floor_axes_N", "floor_upper_N", "white_N2", "differenced_N2", "band_hz"}``: the floor
@@ -146,27 +167,42 @@ def noise_floor(data: FlightData) -> dict:
     velocity's noise is large it is hardly determined. On a 100 Hz log with 1.5 cm/s of velocity noise and a white
     level of 0.0125 N^2 per step, the level came out 0.010 +- 0.009 N^2 over 40 draws of the noise (zero in some),
     and the floor of the second simulator's clean log at half its residual. The floor's spread is taken from the
-    log itself, a grouped jackknife over its Welch segments (:data:`JACKKNIFE_GROUPS` groups, in time order)."""
+    log itself: the larger of Whittle's (:func:`_levels_covariance`) and a grouped jackknife's over its Welch segments
+    (:data:`JACKKNIFE_GROUPS` groups, in time order). The jackknife also sees noise the two shapes do not
+    describe; Whittle's also holds where a level is fitted at zero, where every jackknife replicate is zero too.
+
+    ``model_steps`` (segment index -> the chosen effects' force over each step,
+    :meth:`discovery.fitting.EffectFit.steps`) is taken out of the per-step residual first: a brisk flight's forces
+    reach above the band's edge, and measured on what the nominal model leaves, the floor of the second simulator's
+    waypoint flights came out 3.7 times the residual a right quadratic drag left and 2.1 times a thrust scale's; on
+    what they leave, 0.86 and 0.85 times."""
     floors, weights, whites, differenced, variances = [], [], [], [], []
-    for seg in data.segments:
+    for index, seg in enumerate(data.segments):
         dt = seg.dt
         length = max(64, int(round(_WELCH_S / dt)))
         if seg.n < length:
             continue
-        nu, powers = _periodograms(step_residual(seg), length)
+        residual = step_residual(seg)
+        if model_steps is not None:
+            residual = residual - model_steps(index)
+        nu, powers = _periodograms(residual, length)
         band = nu >= BAND_HZ * dt
         if band.sum() < 4:
             continue
-        sum_w2, sum_dw2 = _kernel_gains(seg)
+        gains = np.array(_kernel_gains(seg))
         levels = _axes_levels(nu[band], powers.mean(axis=0)[band], seg.a_steps_averaged)
-        floors.append(levels[:, 0] * sum_w2 + levels[:, 1] * sum_dw2)
+        floors.append(levels @ gains)
+        # the spread of the floor (its square, summed over the axes): the larger of Whittle's and the jackknife's
+        whittle = sum(float(gains @ _levels_covariance(nu[band], levels[a], seg.a_steps_averaged, len(powers)) @ gains)
+                      for a in range(3))
         groups = np.array_split(np.arange(len(powers)), min(JACKKNIFE_GROUPS, len(powers)))
         if len(groups) > 1:
             totals = np.array([np.sum(_axes_levels(nu[band], np.delete(powers, g, axis=0).mean(axis=0)[band],
-                                                   seg.a_steps_averaged) @ [sum_w2, sum_dw2]) for g in groups])
-            variances.append((len(groups) - 1) / len(groups) * float(np.sum((totals - totals.mean()) ** 2)))
+                                                   seg.a_steps_averaged) @ gains) for g in groups])
+            jackknife = (len(groups) - 1) / len(groups) * float(np.sum((totals - totals.mean()) ** 2))
         else:  # one spectrum segment (a stretch of a few seconds): its floor taken as known only to its own size
-            variances.append(float(np.sum(floors[-1])) ** 2)
+            jackknife = float(np.sum(floors[-1])) ** 2
+        variances.append(max(whittle, jackknife))
         whites.append(levels[:, 0])
         differenced.append(levels[:, 1])
         weights.append(seg.n)

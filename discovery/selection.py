@@ -72,7 +72,7 @@ from wall_env.effects import Effect
 
 __all__ = ["ALPHA", "MIN_SHARE", "MIN_WEIGHT_SHARE", "VARIANTS", "Candidate", "Step", "Selection", "effective_samples",
            "parameter_price", "score", "priced", "make_fitter", "options_without_parameters", "forward_selection",
-           "fit_only"]
+           "fit_only", "floor_left_by"]
 
 ALPHA = 1e-4  # significance a parameter must reach on held-out data
 MIN_SHARE = 0.02  # share of the held-out force-gap energy left without it that an effect must explain
@@ -427,7 +427,8 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
     with_lag, without = _scored_on(fitter, cand, clear), _scored_on(fitter, current, clear)
     if cand.score < current.score:
         pays = True
-    elif is_unexplained(math.sqrt(without[1]), noise_floor(fitter.data), fitter.data.weight, MIN_WEIGHT_SHARE):
+    elif is_unexplained(math.sqrt(without[1]), floor_left_by(fitter.data, current), fitter.data.weight,
+                        MIN_WEIGHT_SHARE):
         # next to a structure the chosen effects leave, neither the rows past the starts nor the lag's standard
         # error can be trusted to tell a lag from a share of that structure
         pays = False
@@ -450,6 +451,12 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
     return {"time_constant_s": tau, "std_s": tau_std, "interval_95_share": share, "to_narrow": to_narrow,
             "explained": explained, "force_rms_N": force_rms,
             "kept": not reason, "reason": reason, "determined": not cases, "moves": moves, "effect_std": joint_std}
+
+
+def floor_left_by(data: FlightData, cand: Candidate) -> dict:
+    """:func:`discovery.noise.noise_floor` on what ``cand``'s effects leave."""
+    problem = cand.problem
+    return noise_floor(data, None if problem is None else lambda s: problem.steps(cand.fit.theta, s))
 
 
 def _scored_on(fitter: Fitter, cand: Candidate, rows: list[np.ndarray]) -> tuple[float, float]:

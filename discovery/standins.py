@@ -35,7 +35,7 @@ import numpy as np
 
 from discovery.fitting import Candidate, Fitter
 from discovery.regressors import Regressor
-from discovery.residuals import FlightData
+from discovery.residuals import FlightData, step_average_samples
 from wall_env.effects import Effect, FlightContext, Parameter, Wrench
 
 __all__ = ["Structure", "StructureTerm", "structure_for", "structures_for", "test_effect", "own_quantity", "depends_on",
@@ -97,11 +97,13 @@ class StructureTerm:
         jacobian = self._at_rows[segment]
         return jacobian @ np.asarray(theta, dtype=float), jacobian
 
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+    def steps(self, segment: int, theta: np.ndarray) -> np.ndarray:
         theta = np.asarray(theta, dtype=float)
         basis = self._basis[segment]
-        per_sample = basis @ theta if theta.ndim == 1 else np.einsum("nap,np->na", basis, theta)
-        return self.data.segments[segment].smooth_force(per_sample)
+        return step_average_samples(basis @ theta if theta.ndim == 1 else np.einsum("nap,np->na", basis, theta))
+
+    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+        return self.data.segments[segment].kernel.step_average(self.steps(segment, theta))
 
     def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
         return np.zeros(self.size, dtype=bool)

@@ -27,7 +27,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from discovery.residuals import FlightData
+from discovery.residuals import FlightData, step_average_samples
 from wall_env.effects import Effect, FlightContext, Parameter, ThrustScale, Wrench, make_effect
 
 __all__ = ["ThrustMap", "ThrustMapTerm", "OFFSET", "make_candidate", "written_effects", "WRITTEN_NOTE"]
@@ -91,11 +91,13 @@ class ThrustMapTerm:
         jacobian, _ = self._base[segment]
         return jacobian @ self._theta(theta), jacobian
 
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+    def steps(self, segment: int, theta: np.ndarray) -> np.ndarray:
         _, columns = self._base[segment]
         shifted = self._theta(theta)
-        per_sample = np.einsum("nap,np->na", columns, np.broadcast_to(shifted, (columns.shape[0], 2)))
-        return self.data.segments[segment].smooth_force(per_sample)
+        return step_average_samples(np.einsum("nap,np->na", columns, np.broadcast_to(shifted, (columns.shape[0], 2))))
+
+    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+        return self.data.segments[segment].kernel.step_average(self.steps(segment, theta))
 
     def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
         return np.zeros(self.size, dtype=bool)

@@ -88,13 +88,6 @@ class BoundedWallTerm(EffectTerm):
     def _sample_mask(self, s: int) -> np.ndarray | None:
         return self._masks[s]
 
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
-        seg = self.data.segments[segment]
-        if not self._active[segment]:
-            return np.zeros((seg.n, 3))
-        force = self._evaluators[segment].force(seg.states, theta) * self._masks[segment][:, None]
-        return seg.smooth_force(force)
-
 
 def find_edge(data: FlightData, suction_force: np.ndarray, data_suction: np.ndarray) -> dict | None:
     """The edge across which the data's suction ``data_suction`` ``(N, 3)`` stops following the fitted suction

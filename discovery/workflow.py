@@ -78,7 +78,6 @@ from discovery.flight_log import FlightLog
 from discovery.flights import conditions, model_on, still_air
 from discovery.form_range import fit_within_form
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG
-from discovery.noise import noise_floor
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
@@ -87,6 +86,7 @@ from discovery.selection import (
     Selection,
     effect_name,
     fit_only,
+    floor_left_by,
     forward_selection,
     parameter_price,
     sequential_explained,
@@ -278,7 +278,8 @@ class Discovery:
         self.limits_ += selection.form_limits
         self._lag_limits(lag)
         # what the flight determined, fitted again without the rest; never worse than the nominal model
-        self.noise_ = noise_floor(data)
+        # measured on what the chosen effects leave: a brisk flight's forces reach into the noise's band
+        self.noise_ = floor_left_by(data, selection.chosen)
         self.stand_ins_: list[dict] = []
         self.withheld_: dict[str, Any] | None = None
         self.form_range_: dict[str, Any] | None = None

@@ -10,8 +10,8 @@ import json
 import numpy as np
 import pytest
 
-from discovery.flight_log import read_log
 import discovery.noise as noise
+from discovery.flight_log import read_log
 from discovery.noise import FLOOR_FACTOR, _fit_levels, _kernel_gains, noise_floor
 from discovery.report import format_summary
 from discovery.residuals import prepare
@@ -25,7 +25,7 @@ WEIGHT = MASS * GRAVITY
 
 
 def _log(tmp_path, name, effects, seed, *, duration=40.0, rate=100.0, flight=OPEN, wall=False, **kwargs):
-    fly_keys = {k: kwargs.pop(k) for k in ("takeoff", "gains") if k in kwargs}
+    fly_keys = {k: kwargs.pop(k) for k in ("takeoff", "gains", "waypoints") if k in kwargs}
     rows = fly(effects, duration=duration, rate_hz=rate, seed=seed, **flight, **fly_keys)
     return write(rows, tmp_path / f"{name}.csv", seed=seed, wall=wall, **kwargs)
 
@@ -74,6 +74,19 @@ def test_the_floors_upper_bound_covers_the_floor_where_the_white_level_is_hardly
     # the stated spread (upper = sqrt(floor^2 + 1.645 std(floor^2))) against the draws' own spread of floor^2
     stated = np.mean((uppers**2 - floors**2) / 1.645)
     assert 1 / 1.6 < stated / np.std(floors**2) < 1.6
+
+
+def test_the_floor_is_measured_on_what_the_chosen_effects_leave(tmp_path):
+    """Flown briskly between waypoints, a 10 % thrust error's force changes above 2 Hz, where the floor is measured:
+    on what the nominal model leaves the floor came out 3.3 times the residual the right thrust scale leaves (such a
+    floor calls a real residual of that size noise); on what the chosen effects leave, 0.96 times."""
+    path = _log(tmp_path, "brisk", {"thrust_scale": 0.9}, 390, flight={**OPEN, "amplitude": (2.0, 2.0, 0.4)},
+                waypoints=2.0)
+    found = Discovery().fit(read_log(path))
+    assert found.names_ == ["thrust_scale"]
+    after = found.gap_after_["force_rms_N"]
+    assert 0.75 < after / found.noise_["floor_N"] < 1.25
+    assert noise_floor(found.data_)["floor_N"] > 1.5 * after  # on what the nominal model leaves
 
 
 def test_a_clean_log_is_within_its_own_noise_floor(tmp_path):
