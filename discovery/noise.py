@@ -40,6 +40,9 @@ _WELCH_S = 2.56  # s per Welch segment of the per-step residual (0.4 Hz resoluti
 _SPECTRUM_S = 20.0  # s per Welch segment of the smoothed residual (0.05 Hz resolution)
 JACKKNIFE_GROUPS = 8  # groups of Welch segments the floor's spread is taken over (leaving out one at a time)
 Z_UPPER_95 = 1.645  # standard normal quantile of a one-sided 95 % bound
+#: a log whose per-step residual has, at the top quarter of the band, less than this share of the power the two
+#: noise shapes fitted predict (on its weakest axis) has noise that falls with frequency: filtered states
+FILTERED_SHARE = 0.5
 
 
 def step_residual(seg: Segment) -> np.ndarray:
@@ -157,10 +160,17 @@ def _kernel_gains(seg: Segment) -> tuple[float, float]:
 def noise_floor(data: FlightData, model_steps: Callable[[int], np.ndarray] | None = None) -> dict:
     """The rms force residual (N) that measurement noise and unlogged disturbances leave after smoothing.
 
-    Returns ``{"floor_N", "floor_axes_N", "floor_upper_N", "white_N2", "differenced_N2", "band_hz"}``: the floor
-    over all three axes (vector norm) and per world axis, its one-sided 95 % upper bound, and the fitted white and
-    differenced-white levels (N^2 per step, per axis, averaged over segments weighted by their samples).
-    ``floor_N`` is NaN when no segment is long enough or its rate too low to have a band above :data:`BAND_HZ`.
+    Returns ``{"floor_N", "floor_axes_N", "floor_upper_N", "white_N2", "differenced_N2", "band_hz",
+    "band_top_share", "filtered"}``: the floor over all three axes (vector norm) and per world axis, its one-sided
+    95 % upper bound, the fitted white and differenced-white levels (N^2 per step, per axis, averaged over segments
+    weighted by their samples), the power at the top quarter of the band as a share of what the fitted shapes
+    predict there (weakest axis), and whether that share is below :data:`FILTERED_SHARE`. ``floor_N`` is NaN when no
+    segment is long enough or its rate too low to have a band above :data:`BAND_HZ`.
+
+    Where the residual's noise falls with frequency faster than the fitted shapes allow (a PX4 SITL log's
+    velocity, an estimator's output: at the band's top 4 % of the fit's power on its weakest axis, against 93-99 % on
+    the second simulator's logs), the log's states are filtered, the estimator's own errors live below 2 Hz unseen,
+    and the floor is only a lower bound.
 
     The upper bound is what a residual is judged against (:func:`discovery.unexplained.is_unexplained`): the
     white level shows only where the differenced one has not yet risen, the low end of the band, and where the
@@ -176,7 +186,7 @@ def noise_floor(data: FlightData, model_steps: Callable[[int], np.ndarray] | Non
     reach above the band's edge, and measured on what the nominal model leaves, the floor of the second simulator's
     waypoint flights came out 3.7 times the residual a right quadratic drag left and 2.1 times a thrust scale's; on
     what they leave, 0.86 and 0.85 times."""
-    floors, weights, whites, differenced, variances = [], [], [], [], []
+    floors, weights, whites, differenced, variances, shares = [], [], [], [], [], []
     for index, seg in enumerate(data.segments):
         dt = seg.dt
         length = max(64, int(round(_WELCH_S / dt)))
@@ -190,8 +200,12 @@ def noise_floor(data: FlightData, model_steps: Callable[[int], np.ndarray] | Non
         if band.sum() < 4:
             continue
         gains = np.array(_kernel_gains(seg))
-        levels = _axes_levels(nu[band], powers.mean(axis=0)[band], seg.a_steps_averaged)
+        power = powers.mean(axis=0)[band]
+        levels = _axes_levels(nu[band], power, seg.a_steps_averaged)
         floors.append(levels @ gains)
+        top = slice(-max(1, int(band.sum()) // 4), None)  # the top quarter of the band: power there against the fit's
+        fitted = _design(nu[band], seg.a_steps_averaged)[top] @ levels.T
+        shares.append(float(np.min(power[top].mean(axis=0) / np.maximum(fitted.mean(axis=0), 1e-300))))
         # the spread of the floor (its square, summed over the axes): the larger of Whittle's and the jackknife's
         whittle = sum(float(gains @ _levels_covariance(nu[band], levels[a], seg.a_steps_averaged, len(powers)) @ gains)
                       for a in range(3))
@@ -209,7 +223,7 @@ def noise_floor(data: FlightData, model_steps: Callable[[int], np.ndarray] | Non
     if not floors:
         nan = float("nan")
         return {"floor_N": nan, "floor_axes_N": [nan] * 3, "floor_upper_N": nan, "white_N2": [nan] * 3,
-                "differenced_N2": [nan] * 3, "band_hz": BAND_HZ}
+                "differenced_N2": [nan] * 3, "band_hz": BAND_HZ, "band_top_share": nan, "filtered": False}
     w = np.asarray(weights, dtype=float) / float(np.sum(weights))
     axes = np.sqrt(np.asarray(floors).T @ w)
     square = float(np.sum(axes**2))
@@ -217,7 +231,8 @@ def noise_floor(data: FlightData, model_steps: Callable[[int], np.ndarray] | Non
     return {"floor_N": float(np.sqrt(square)), "floor_axes_N": [float(a) for a in axes],
             "floor_upper_N": float(np.sqrt(square + Z_UPPER_95 * spread)),
             "white_N2": [float(x) for x in np.asarray(whites).T @ w],
-            "differenced_N2": [float(x) for x in np.asarray(differenced).T @ w], "band_hz": BAND_HZ}
+            "differenced_N2": [float(x) for x in np.asarray(differenced).T @ w], "band_hz": BAND_HZ,
+            "band_top_share": float(np.asarray(shares) @ w), "filtered": bool(np.asarray(shares) @ w < FILTERED_SHARE)}
 
 
 def judged_floor(floor: dict) -> float:

@@ -78,6 +78,7 @@ from discovery.flight_log import FlightLog
 from discovery.flights import conditions, model_on, still_air
 from discovery.form_range import fit_within_form
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG
+from discovery.noise import BAND_HZ
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
@@ -280,6 +281,13 @@ class Discovery:
         # what the flight determined, fitted again without the rest; never worse than the nominal model
         # measured on what the chosen effects leave: a brisk flight's forces reach into the noise's band
         self.noise_ = floor_left_by(data, selection.chosen)
+        if self.noise_["filtered"]:
+            self.notes_.append(
+                f"the residual's noise falls with frequency: at the top of the band above {BAND_HZ:g} Hz it has "
+                f"{100 * self.noise_['band_top_share']:.0f} % of the power that white and differenced-white noise "
+                "fitted there predict; the log's states look filtered (an estimator's output), whose own errors below "
+                f"{BAND_HZ:g} Hz the noise floor cannot see: the floor ({self.noise_['floor_N']:.4f} N) is a lower bound, "
+                "and 'times the noise floor' may overstate what is left")
         self.stand_ins_: list[dict] = []
         self.withheld_: dict[str, Any] | None = None
         self.form_range_: dict[str, Any] | None = None
