@@ -39,9 +39,10 @@ held-out residual and score, so that no effect set is fitted twice.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -84,30 +85,40 @@ def hac_lags(segment) -> int:
     return segment.hac_lags()
 
 
-class Term(Protocol):
-    """One effect's contribution ``K[F(theta)]`` per segment (what :class:`EffectFit` sums)."""
+class Term(ABC):
+    """One effect's contribution ``K[F(theta)]`` per segment of ``data`` (what :class:`EffectFit` sums).
 
+    A term gives its force per step (:meth:`steps`) and, with its Jacobian, at the fit rows
+    (:meth:`at_rows`); its force at every sample (:meth:`smoothed`) is the steps through each
+    segment's kernel. ``affine`` says the Jacobian does not depend on ``theta``.
+    """
+
+    data: FlightData
     size: int
     low: np.ndarray
     high: np.ndarray
     affine: bool
 
+    @abstractmethod
     def at_rows(self, segment: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, size)`` at the segment's fit rows."""
 
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
-        """``K[F]`` ``(n, 3)`` at every sample; ``theta`` ``(size,)`` or one row per sample."""
-
+    @abstractmethod
     def steps(self, segment: int, theta: np.ndarray) -> np.ndarray:
         """``F`` averaged over each step ``(n - 1, 3)`` (unsmoothed: what the per-step residual of
         :func:`discovery.noise.step_residual` holds of it); ``theta`` ``(size,)`` or one row per sample."""
 
+    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
+        """``K[F]`` ``(n, 3)`` at every sample: :meth:`steps` through the segment's kernel."""
+        return self.data.segments[segment].kernel.step_average(self.steps(segment, theta))
+
     def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
         """Entries a cross-validation fold must hold at their defaults (nuisance parameters that reach
-        its held-out rows ``held``)."""
+        its held-out rows ``held``); a term without nuisance parameters holds none."""
+        return np.zeros(self.size, dtype=bool)
 
 
-class EffectTerm:
+class EffectTerm(Term):
     """A library effect's ``K[F(theta)]`` at every segment's fit rows, through its CasADi function, with caching."""
 
     def __init__(self, data: FlightData, effect: Effect):
@@ -150,9 +161,6 @@ class EffectTerm:
             self.affine = True
             self._affine_base = [(f, j, a) for f, j in at_a]
 
-    def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
-        return np.zeros(self.size, dtype=bool)  # an effect has no nuisance parameters
-
     def at_rows(self, segment: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         theta = np.asarray(theta, dtype=float)
         if self._affine_base is not None:
@@ -172,9 +180,6 @@ class EffectTerm:
         force = self._evaluators[segment].force(seg.states, theta)
         mask = self._sample_mask(segment)
         return step_average_samples(force if mask is None else force * mask[:, None])
-
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
-        return self.data.segments[segment].kernel.step_average(self.steps(segment, theta))
 
 
 def make_term(data: FlightData, effect: Effect) -> Term:

@@ -35,6 +35,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from discovery.fitting import Term
 from discovery.residuals import FlightData
 from wall_env.effects import Effect, FlightContext, Parameter, Wrench
 from wall_env.motor_lag import held_command_response
@@ -80,7 +81,7 @@ class MotorLag(Effect):
         raise TypeError("a motor lag is the vehicle's motor_time_constant (rotor state), not an aerodynamic wrench")
 
 
-class LagTerm:
+class LagTerm(Term):
     """The lag's force ``K[(f(tau, e_s) - f_cmd) z_body]`` and its derivatives at every segment's fit rows.
 
     Same interface as :class:`discovery.fitting.EffectFit`'s effect terms. The logged
@@ -168,10 +169,6 @@ class LagTerm:
                 raise ValueError("a motor lag is evaluated with one parameter vector per segment")
             theta = theta[0]
         return self.scale * self._steps(segment, theta)[0]
-
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
-        """``K[F]`` ``(n, 3)`` at every sample (one parameter vector for the whole segment)."""
-        return self.data.segments[segment].kernel.step_average(self.steps(segment, theta))
 
 
 def lag_force_steps(thrust_logged: Any, t: np.ndarray, z_steps: np.ndarray, tau: float,

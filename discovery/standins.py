@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from discovery.fitting import Candidate, Fitter
+from discovery.fitting import Candidate, Fitter, Term
 from discovery.regressors import Regressor
 from discovery.residuals import FlightData, step_average_samples
 from wall_env.effects import Effect, FlightContext, Parameter, Wrench
@@ -81,7 +81,7 @@ class Structure(Effect):
         raise TypeError("a structure is a description of a residual, not a force on the vehicle")
 
 
-class StructureTerm:
+class StructureTerm(Term):
     """``K[sum_j c_j b_j]`` per segment; affine (see :class:`discovery.fitting.Term`)."""
 
     affine = True
@@ -101,12 +101,6 @@ class StructureTerm:
         theta = np.asarray(theta, dtype=float)
         basis = self._basis[segment]
         return step_average_samples(basis @ theta if theta.ndim == 1 else np.einsum("nap,np->na", basis, theta))
-
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
-        return self.data.segments[segment].kernel.step_average(self.steps(segment, theta))
-
-    def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
-        return np.zeros(self.size, dtype=bool)
 
 
 def _along(columns: np.ndarray, direction: np.ndarray) -> np.ndarray:

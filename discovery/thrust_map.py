@@ -27,6 +27,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from discovery.fitting import Term
 from discovery.residuals import FlightData, step_average_samples
 from wall_env.effects import Effect, FlightContext, Parameter, ThrustScale, Wrench, make_effect
 
@@ -66,7 +67,7 @@ def make_candidate(name: str, **options) -> Effect:
     return make_effect(name, **options)
 
 
-class ThrustMapTerm:
+class ThrustMapTerm(Term):
     """``K[((scale - 1) T + offset) z_body]`` per segment; affine, so evaluated once (see
     :class:`discovery.fitting.Term`). ``T`` is the rotor thrust the nominal model takes as produced."""
 
@@ -95,12 +96,6 @@ class ThrustMapTerm:
         _, columns = self._base[segment]
         shifted = self._theta(theta)
         return step_average_samples(np.einsum("nap,np->na", columns, np.broadcast_to(shifted, (columns.shape[0], 2))))
-
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
-        return self.data.segments[segment].kernel.step_average(self.steps(segment, theta))
-
-    def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
-        return np.zeros(self.size, dtype=bool)
 
 
 def written_effects(effects: list[Effect]) -> tuple[list[Effect], list[str]]:
