@@ -4,6 +4,7 @@ training configuration (:mod:`agents.config`) names; :func:`agents.train.train` 
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,11 @@ def make_ppo(config: dict[str, Any], env: Any, tb_dir: Path | None, verbose: int
     ppo["adaptive_kl"] = ppo.pop("adaptive_kl")
     if final is not None:  # progress runs over the planned timesteps, resumed runs included
         ppo["learning_rate"] = LinearSchedule(float(ppo["learning_rate"]), float(final), 1.0)
-    return LeanPPO("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=config["seed"],
-               tensorboard_log=None if tb_dir is None else str(tb_dir),
-               device="cpu", verbose=verbose, **ppo)
+    model = LeanPPO("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=config["seed"],
+                    tensorboard_log=None if tb_dir is None else str(tb_dir),
+                    device="cpu", verbose=verbose, **ppo)
+    if tb_dir is None:  # without a folder, SB3's learn() makes an empty SB3-<time> folder in the temp dir each call
+        from stable_baselines3.common.logger import HumanOutputFormat, Logger
+
+        model.set_logger(Logger(None, [HumanOutputFormat(sys.stdout)] if verbose >= 1 else []))
+    return model

@@ -79,3 +79,21 @@ def test_the_critic_can_be_wider_than_the_actor():
     assert [layer.out_features for layer in policy.mlp_extractor.value_net if hasattr(layer, "out_features")] == [128, 128]
     with pytest.raises(ValueError, match="policy.critic_arch"):
         apply_overrides(config, ["policy.critic_arch=[0]"])
+
+
+def test_a_learner_without_a_log_folder_writes_nothing_to_the_temp_dir(tmp_path, monkeypatch):
+    """SB3's learn() makes an empty SB3-<time> folder in the temp dir when no logger is set up; ours has none."""
+    import tempfile
+
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from agents.envs import make_vec_env
+    from agents.learner import make_ppo
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    config = apply_overrides(default_config("WallHover"), ["n_envs=2", "ppo.n_steps=32", "ppo.batch_size=64",
+                                                           "ppo.n_epochs=1", "env_kwargs.duration=0.5"])
+    model = make_ppo(config, VecNormalize(make_vec_env(config, 2, vector="batched")), None)
+    model.learn(total_timesteps=64)
+    assert model.num_timesteps == 64
+    assert sorted(p.name for p in tmp_path.glob("SB3-*")) == []
