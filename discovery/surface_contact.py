@@ -64,8 +64,8 @@ from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 from discovery.regressors import rotor_centres_world, surface_clearances
 
-__all__ = ["Strikes", "surface_strikes", "undeclared_strikes", "outward_jolt", "jolt_jump", "pressed_against",
-           "normal_text", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES", "SAME_DISTANCE", "CONTACT_MARGIN",
+__all__ = ["Strikes", "surface_strikes", "undeclared_strikes", "declared_surface", "outward_jolt", "jolt_jump",
+           "pressed_against", "normal_text", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES", "SAME_DISTANCE", "CONTACT_MARGIN",
            "UNDECLARED_CONTACT", "UNDECLARED_DIRECTIONS"]
 
 STRIKE_WINDOW_S = 0.03  # s: a guard stops the vehicle in about this long; the loop's braking takes hundreds of ms
@@ -271,6 +271,25 @@ def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
                     if float(struck.normal @ other.normal) >= np.cos(np.radians(UNDECLARED_APART_DEG))]
             out.append(_turned_to_points(log, rotors_world, struck, _separate(np.concatenate(near)), facing))
     return out
+
+
+def declared_surface(log: FlightLog, struck: Strikes) -> Strikes | None:
+    """``struck``, a surface :func:`undeclared_strikes` found, as the wall or ceiling of ``log.scene`` it is; None
+    when it is none of them. It is a declared plane when its normal lies within :data:`TURN_TO_POINTS_MAX_DEG` of the
+    plane's (guards sliding along a wall push along it too) and every sample in contact has its nearest rotor centre
+    on the plane's free side and within :data:`discovery.coverage.NEAR_SURFACE` of it. :func:`surface_strikes` may miss
+    such strikes: a slow graze on each pass jolts the vehicle too little, and a bounce that stops a few millimetres
+    short of the closest approach is not counted with it. The plane's ``surface``, ``effect``, ``normal`` and
+    ``closest`` replace the undeclared ones; its ``touch_distance`` is the farthest contact sample's distance from the
+    plane, and ``stopped_at`` is None (the scene gives the plane's place)."""
+    rotors_world = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)
+    for surface, effect, normal, distance in _planes(log, rotors_world):
+        near = distance[struck.in_contact]
+        if (float(normal @ struck.normal) >= np.cos(np.radians(TURN_TO_POINTS_MAX_DEG)) and near.size
+                and float(near.min()) >= 0.0 and float(near.max()) < NEAR_SURFACE):
+            return replace(struck, surface=surface, effect=effect, normal=normal, closest=float(distance.min()),
+                           touch_distance=float(near.max()), stopped_at=None)
+    return None
 
 
 def _turned_to_points(log: FlightLog, rotors_world: np.ndarray, struck: Strikes, times: np.ndarray,

@@ -11,6 +11,7 @@ from discovery.surface_contact import (
     CONTACT_MARGIN,
     SAME_DISTANCE,
     STRIKE_WINDOW_S,
+    declared_surface,
     jolt_jump,
     normal_text,
     outward_jolt,
@@ -273,6 +274,32 @@ def test_strikes_on_a_wall_the_scene_does_not_have_name_its_normal_and_where_the
     short, held = _survey(depth=-0.001)
     assert not held.any() and undeclared_strikes(_turned(short, yaw, Scene((), 0.0, None)),
                                                  np.zeros(short.n_samples, dtype=bool)) == []
+
+
+def test_strikes_found_as_undeclared_that_fall_on_a_wall_of_the_scene_are_that_walls():
+    """The five strikes found without the wall in the scene (5 degrees off its normal, as a guard sliding along it
+    pushes) are, in the scene that has the wall, that wall's: its name, effect and normal, the rotor centres'
+    closest approach to its plane, and every contact sample within the stated distance of it. The same wall 1 m
+    farther out, 0.1 m nearer (the rotors went behind it) or turned 90 degrees (0.2 m to the side, within reach of
+    the flight) is not where the strikes were."""
+    yaw = np.radians(35.4)
+    log, held = _survey(depth=0.005)
+    (struck,) = undeclared_strikes(_turned(log, yaw, Scene((), 0.0, None)), np.zeros(log.n_samples, dtype=bool))
+    normal = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    with_wall = _turned(log, yaw, Scene((Wall((0.0, 0.0, 0.0), tuple(normal)),), 0.0, None))
+    wall = declared_surface(with_wall, struck)
+    assert wall is not None and (wall.surface, wall.effect, wall.stopped_at) == ("wall 0", "wall_suction", None)
+    assert np.allclose(wall.normal, normal) and np.array_equal(wall.times, struck.times)
+    rotors = with_wall.p_world[:, None, :] + np.einsum("nij,rj->nri", with_wall.R_body_to_world,
+                                                       with_wall.vehicle.rotor_positions_array)
+    distance = (rotors @ normal).min(axis=1)
+    assert wall.closest == pytest.approx(distance.min(), abs=1e-12) and wall.closest == pytest.approx(STOP, abs=2e-3)
+    assert wall.touch_distance == pytest.approx(distance[struck.in_contact].max(), abs=1e-12)
+    assert STOP < wall.touch_distance < 0.1 and struck.in_contact[held].all()
+    side = np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+    for point, facing in ((-1.0 * normal, normal), (0.1 * normal, normal), (-0.2 * side, side)):
+        elsewhere = _turned(log, yaw, Scene((Wall(tuple(point), tuple(facing)),), 0.0, None))
+        assert declared_surface(elsewhere, struck) is None
 
 
 def test_an_undeclared_wall_struck_along_its_length_is_turned_to_the_plane_through_the_strikes():
