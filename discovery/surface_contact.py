@@ -280,15 +280,20 @@ def declared_surface(log: FlightLog, struck: Strikes) -> Strikes | None:
     on the plane's free side and within :data:`discovery.coverage.NEAR_SURFACE` of it. :func:`surface_strikes` may miss
     such strikes: a slow graze on each pass jolts the vehicle too little, and a bounce that stops a few millimetres
     short of the closest approach is not counted with it. The plane's ``surface``, ``effect``, ``normal`` and
-    ``closest`` replace the undeclared ones; its ``touch_distance`` is the farthest contact sample's distance from the
-    plane, and ``stopped_at`` is None (the scene gives the plane's place)."""
+    ``closest`` replace the undeclared ones, and ``stopped_at`` is None (the scene gives the plane's place). As on a
+    plane of the scene, the guards touch it as far out as the strikes stopped the rotor centres: nearer than that
+    (``touch_distance``, with :data:`CONTACT_MARGIN`) is contact too, the grazes on other passes included."""
     rotors_world = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)
+    pad = _strike_pad(float(np.median(np.diff(log.t))))
     for surface, effect, normal, distance in _planes(log, rotors_world):
         near = distance[struck.in_contact]
         if (float(normal @ struck.normal) >= np.cos(np.radians(TURN_TO_POINTS_MAX_DEG)) and near.size
                 and float(near.min()) >= 0.0 and float(near.max()) < NEAR_SURFACE):
+            stops = [float(distance[max(0, i - pad):i + pad + 1].min()) for i in np.searchsorted(log.t, struck.times)]
+            touch = max(stops, default=float(distance.min())) + CONTACT_MARGIN
+            nearer = np.convolve((distance < touch).astype(float), np.ones(2 * pad + 1), mode="same") > 0
             return replace(struck, surface=surface, effect=effect, normal=normal, closest=float(distance.min()),
-                           touch_distance=float(near.max()), stopped_at=None)
+                           touch_distance=touch, in_contact=struck.in_contact | nearer, stopped_at=None)
     return None
 
 

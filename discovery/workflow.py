@@ -825,31 +825,19 @@ class Discovery:
                     out[a:b] = True
             return out
 
-        def declared_contact(struck: Strikes, in_contact: np.ndarray, samples: str) -> tuple[str, str, str, str]:
-            """Leave ``in_contact`` (``samples``, in the limit's words) out as the declared surface's contact, with
-            the limit on its pull; returns the surface's kind ("wall" or "ceiling"), its name in a note, its pull
-            and the reason."""
-            kind = struck.surface.split(" ")[0]
+        def declared_contact(struck: Strikes, in_contact: np.ndarray, pushed: str) -> None:
+            """Leave ``in_contact`` out as contact with the scene's surface ``struck``, with a note and the limit on
+            its pull; ``pushed`` says how its strikes pushed the vehicle."""
+            kind = struck.surface.split(" ")[0]  # "wall" or "ceiling"
             pull = "suction" if kind == "wall" else "the ceiling effect"
             name = struck.surface if kind == "wall" else f"the {struck.surface}"
             reason = f"{kind} contact"
             by_reason[reason] = by_reason.get(reason, np.zeros(log.n_samples, dtype=bool)) | in_contact
-            self._contact_limits.append({
-                "effects": [struck.effect],
-                "reason": f"{log.source} touched {name}; {samples} are {reason}, left out, so {pull} "
-                          "there is not measured",
-                "manoeuvre": f"approach the {kind} slowly and turn back short of touching it, at several distances"})
-            return kind, name, pull, reason
-
-        for struck in surface_strikes(log):
-            in_contact = with_held(struck.in_contact)
-            kind, name, pull, reason = declared_contact(
-                struck, in_contact, f"the samples nearer it than {1e3 * struck.touch_distance:.0f} mm (rotor centre)")
             evidence = []
             if len(struck.times):
                 evidence.append(
-                    f"struck {name} {_listed_times(struck.times)}: each time pushed away from it more "
-                    f"than {STRIKE_Z:g} times the log's own scatter beyond what the thrust and gravity do, within "
+                    f"struck {name} {_listed_times(struck.times)}: each time pushed {pushed} more than "
+                    f"{STRIKE_Z:g} times the log's own scatter beyond what the thrust and gravity do, within "
                     f"{1e3 * STRIKE_WINDOW_S:g} ms, and within {1e3 * struck.give:.3g} mm of its closest approach")
             if struck.pressed_s > 0:
                 evidence.append(
@@ -863,25 +851,25 @@ class Discovery:
                 f"{kind} pushes the vehicle there, a force that is not aerodynamic; {pull} nearer than that is not "
                 "determined by this flight (a guard's reach, if the vehicle has guards, is about "
                 f"{1e3 * (struck.touch_distance - CONTACT_MARGIN):.0f} mm)")
+            self._contact_limits.append({
+                "effects": [struck.effect],
+                "reason": f"{log.source} touched {name}; the samples nearer it than "
+                          f"{1e3 * struck.touch_distance:.0f} mm (rotor centre) are {reason}, left out, so {pull} "
+                          "there is not measured",
+                "manoeuvre": f"approach the {kind} slowly and turn back short of touching it, at several distances"})
+
+        for struck in surface_strikes(log):
+            declared_contact(struck, with_held(struck.in_contact), "away from it")
         declared = np.logical_or.reduce([np.zeros(log.n_samples, dtype=bool), *by_reason.values()])
         excluded = held | declared
         for struck in undeclared_strikes(log, excluded):
             in_contact = with_held(struck.in_contact & ~declared)
             scene_surface = declared_surface(log, struck)
             if scene_surface is not None:  # strikes the test on the scene's plane missed: the scene has it
-                kind, name, _, reason = declared_contact(
-                    scene_surface, in_contact, "the samples around its strikes (the nearest rotor centre within "
-                    f"{1e3 * scene_surface.touch_distance:.0f} mm)")
                 off = float(np.degrees(np.arccos(np.clip(struck.normal @ scene_surface.normal, -1.0, 1.0))))
-                self.notes_.append(
-                    f"{log.source}: the vehicle struck {name} {_listed_times(struck.times)}: each time pushed along "
-                    f"{normal_text(struck.normal)} (world), {off:.0f} degrees off its normal (a guard sliding along "
-                    f"it pushes along it too), more than {STRIKE_Z:g} times the log's own scatter beyond what the "
-                    f"thrust and gravity do, within {1e3 * STRIKE_WINDOW_S:g} ms, where its rotor centres went "
-                    f"farthest toward it (the nearest rotor centre came within {1e3 * scene_surface.closest:.1f} mm "
-                    f"of its plane). {in_contact.sum() * dt:.1f} s around the strikes (or held there), the nearest rotor "
-                    f"centre within {1e3 * scene_surface.touch_distance:.1f} mm of it, are left out as {reason}: the "
-                    f"{kind} pushes the vehicle there, a force that is not aerodynamic")
+                declared_contact(scene_surface, with_held(scene_surface.in_contact & ~declared),
+                                 f"along {normal_text(struck.normal)} (world), {off:.0f} degrees off its normal (a "
+                                 "guard sliding along it pushes along it too),")
                 continue
             reason = UNDECLARED_CONTACT
             by_reason[reason] = by_reason.get(reason, np.zeros(log.n_samples, dtype=bool)) | in_contact
