@@ -15,8 +15,9 @@ pinned vehicle looks like a pull too weak (it does not accelerate, however hard 
 ceiling effect pulls), so a fit that keeps these samples finds a wrong k_s or ceiling radius,
 or nothing and an unexplained force. :func:`surface_strikes` finds the strikes and the samples
 at or nearer than the distance they happened at; the workflow leaves those out with the reason
-"wall contact" or "ceiling contact". The ground is not asked: a touchdown is a strike on it by
-design, and :mod:`discovery.coverage` leaves the ground's rests and touchdowns out.
+"wall contact" or "ceiling contact". On the ground a touchdown is a strike by design, and
+:mod:`discovery.coverage` leaves the ground's rests and touchdowns out; :func:`ground_strikes` finds
+the strikes on it that the vehicle flew on from (bounces), left out as "ground strike".
 
 A surface the scene does not have (a wall missing from the sidecar, a net, an obstacle) is found by
 :func:`undeclared_strikes`: the same strikes against a plane where the rotor centres went farthest,
@@ -64,7 +65,7 @@ from discovery.differentiation import moving_average
 from discovery.flight_log import FlightLog
 from discovery.regressors import rotor_centres_world, surface_clearances
 
-__all__ = ["Strikes", "surface_strikes", "undeclared_strikes", "declared_surface", "outward_jolt", "jolt_jump",
+__all__ = ["Strikes", "surface_strikes", "ground_strikes", "undeclared_strikes", "declared_surface", "outward_jolt", "jolt_jump",
            "pressed_against", "normal_text", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES", "SAME_DISTANCE", "CONTACT_MARGIN",
            "UNDECLARED_CONTACT", "UNDECLARED_DIRECTIONS"]
 
@@ -97,7 +98,7 @@ TURN_TO_POINTS_WITHIN = 0.03  # m: and only when every point lies this near it (
 class Strikes:
     """The strikes on one surface of a log's scene (or one it does not have) and the samples in contact with it."""
 
-    surface: str  # "wall 0", "wall 1", ... or "ceiling"; or "a surface not in the scene, facing ..."
+    surface: str  # "wall 0", "wall 1", ..., "ceiling" or "ground"; or "a surface not in the scene, facing ..."
     effect: str | None  # the effect whose pull acts there: "wall_suction" or "ceiling_effect"; None if undeclared
     normal: np.ndarray  # (3,) the surface's unit normal into free space
     times: np.ndarray  # (strikes,) s: the strongest jump of each strike (empty when only pressed against it)
@@ -218,6 +219,26 @@ def surface_strikes(log: FlightLog) -> list[Strikes]:
         if struck is not None:
             out.append(struck)
     return out
+
+
+def ground_strikes(log: FlightLog, excluded: np.ndarray) -> Strikes | None:
+    """The ground struck in flight: bounces off it that the vehicle flew on from (a survey that dips onto the
+    ground, a hard landing it takes off again from), found as strikes on a wall are, the distance being the lowest
+    rotor centre's height above ``scene.ground_z``; None when there are fewer than :data:`MIN_STRIKES`. A touchdown
+    the vehicle then rests after is not one (:mod:`discovery.coverage` leaves rests and touchdowns out), nor are the
+    samples ``excluded`` (those rests). Without this, a survey striking the ground at 3.5 m/s every 15 s left 1 N
+    of its impacts to be fitted, as a ground effect 4 times too wide and a drag it did not have."""
+    if log.n_samples < 3 or excluded.all() or log.scene.ground_z is None:
+        return None
+    rotors_world = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)
+    height = rotors_world[:, :, 2].min(axis=1) - log.scene.ground_z
+    closest = float(height[~excluded].min())
+    if closest >= NEAR_SURFACE:
+        return None
+    up = np.array([0.0, 0.0, 1.0])
+    jump = jolt_jump(outward_jolt(log, up), _half_window(log))
+    return _strikes_on(log, "ground", "ground_effect", up, height, closest, jump,
+                       candidates=(height > 0) & ~excluded, pressed=False, from_onset=True, bounces_only=True)
 
 
 def undeclared_strikes(log: FlightLog, excluded: np.ndarray) -> list[Strikes]:
@@ -365,13 +386,14 @@ def _strike_pad(dt: float) -> int:
 
 def _strikes_on(log: FlightLog, surface: str, effect: str | None, normal: np.ndarray, distance: np.ndarray,
                 closest: float, jolt: np.ndarray, *, candidates: np.ndarray, pressed: bool,
-                from_onset: bool = False) -> Strikes | None:
+                from_onset: bool = False, bounces_only: bool = False) -> Strikes | None:
     """The strikes on one plane (unit ``normal`` into free space, the nearest rotor centre ``distance`` from it at
     every sample, ``closest`` at the nearest; ``jolt`` the :func:`jolt_jump` along the normal) at the samples
     ``candidates``, and the samples in contact; None when it was not touched. With ``pressed``, a vehicle pressed
     against it (:func:`pressed_against`) has touched it too. With ``from_onset`` the contact reaches as far as any
     strike's push began (:data:`ONSET_Z`), not only as far as its strongest samples: generous for a fast strike,
-    whose 30 ms window spans centimetres of travel."""
+    whose 30 ms window spans centimetres of travel. With ``bounces_only`` only strikes the vehicle flew on from
+    count (:data:`MIN_STRIKES` of them), and the contact reaches as far as they stopped it."""
     dt = float(np.median(np.diff(log.t)))
     half = _half_window(log)
     finite = np.isfinite(jolt)
@@ -403,8 +425,14 @@ def _strikes_on(log: FlightLog, surface: str, effect: str | None, normal: np.nda
     # far as every sample of a slower strike's jolt, whose centred window begins before the guard touches
     pad = _strike_pad(dt)
     stops = [float(distance[max(0, s[0] - pad):s[-1] + pad + 1].min()) for s in strikes]
-    reach = max([float(distance[near].max()) if near.size else -np.inf, *stops]) + CONTACT_MARGIN
-    struck = len(strikes) >= MIN_STRIKES or any(_stays_pinned(log.t, distance, s[-1], reach) for s in strikes)
+    if bounces_only:  # a strike the vehicle then rests after (within what it gave) is a touchdown, not a bounce
+        kept = [k for k, s in enumerate(strikes) if not _stays_pinned(log.t, distance, s[-1], stops[k] + give)]
+        strikes, stops = [strikes[k] for k in kept], [stops[k] for k in kept]
+        reach = max(stops, default=-np.inf) + CONTACT_MARGIN
+        struck = len(strikes) >= MIN_STRIKES
+    else:
+        reach = max([float(distance[near].max()) if near.size else -np.inf, *stops]) + CONTACT_MARGIN
+        struck = len(strikes) >= MIN_STRIKES or any(_stays_pinned(log.t, distance, s[-1], reach) for s in strikes)
     if not struck and against.sum() * dt < PRESSED_S:
         return None
     touching = np.flatnonzero(against)

@@ -100,6 +100,7 @@ from discovery.surface_contact import (
     UNDECLARED_CONTACT,
     Strikes,
     declared_surface,
+    ground_strikes,
     normal_text,
     surface_strikes,
     undeclared_strikes,
@@ -828,10 +829,12 @@ class Discovery:
         def declared_contact(struck: Strikes, in_contact: np.ndarray, pushed: str) -> None:
             """Leave ``in_contact`` out as contact with the scene's surface ``struck``, with a note and the limit on
             its pull; ``pushed`` says how its strikes pushed the vehicle."""
-            kind = struck.surface.split(" ")[0]  # "wall" or "ceiling"
-            pull = "suction" if kind == "wall" else "the ceiling effect"
+            kind = struck.surface.split(" ")[0]  # "wall", "ceiling" or "ground"
+            pull = {"wall": "suction", "ceiling": "the ceiling effect", "ground": "the ground effect"}[kind]
             name = struck.surface if kind == "wall" else f"the {struck.surface}"
-            reason = f"{kind} contact"
+            reason = "ground strike" if kind == "ground" else f"{kind} contact"  # apart from a touchdown's
+            reach_of = ("the landing gear's reach below the rotor centres, as struck" if kind == "ground" else
+                        "a guard's reach, if the vehicle has guards,")
             by_reason[reason] = by_reason.get(reason, np.zeros(log.n_samples, dtype=bool)) | in_contact
             evidence = []
             if len(struck.times):
@@ -849,8 +852,8 @@ class Discovery:
                 f"{1e3 * struck.closest:.1f} mm of the plane). {in_contact.sum() * dt:.1f} s with a rotor centre "
                 f"nearer than {1e3 * struck.touch_distance:.1f} mm (or held there) are left out as {reason}: the "
                 f"{kind} pushes the vehicle there, a force that is not aerodynamic; {pull} nearer than that is not "
-                "determined by this flight (a guard's reach, if the vehicle has guards, is about "
-                f"{1e3 * (struck.touch_distance - CONTACT_MARGIN):.0f} mm)")
+                f"determined by this flight ({reach_of} is about {1e3 * (struck.touch_distance - CONTACT_MARGIN):.0f} "
+                "mm)")
             self._contact_limits.append({
                 "effects": [struck.effect],
                 "reason": f"{log.source} touched {name}; the samples nearer it than "
@@ -860,6 +863,9 @@ class Discovery:
 
         for struck in surface_strikes(log):
             declared_contact(struck, with_held(struck.in_contact), "away from it")
+        bounces = ground_strikes(log, held)
+        if bounces is not None:
+            declared_contact(bounces, bounces.in_contact & ~held, "up, away from it, and flew on,")
         declared = np.logical_or.reduce([np.zeros(log.n_samples, dtype=bool), *by_reason.values()])
         excluded = held | declared
         for struck in undeclared_strikes(log, excluded):

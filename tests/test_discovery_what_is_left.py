@@ -401,6 +401,28 @@ def test_take_off_and_landing_on_the_ground_are_left_out(tmp_path):
     assert found.unexplained_ is None
 
 
+def test_a_survey_that_strikes_the_ground_and_flies_on_has_its_strikes_left_out(tmp_path, monkeypatch):
+    """A 1.1 kg vehicle flown briskly between waypoints (sharpness 3) cuts its thrust to nothing on the way down
+    and strikes the ground at 3.5 m/s, twice, flying on each time (the second simulator's seed 7895). Left in, the
+    impacts drowned the drag: nothing was named (on a longer flight, a ground effect 4 times too wide beside a
+    quadratic drag). Both strikes are found and left out with a note and a limit on the ground effect; the drag is
+    within 5 %. The touchdown at the end, which the vehicle rests after, is not counted as a strike."""
+    import tests.independent_sim as sim
+
+    monkeypatch.setattr(sim, "MASS", 1.1)
+    drag = [0.25, 0.22, 0.4]
+    found = Discovery().fit(read_log(_log(tmp_path, "bounces", {"linear_drag": drag}, 395, duration=40.0, rate=50.0,
+                                          takeoff=True, waypoints=3.0)))
+    assert found.names_ == ["linear_drag"]
+    assert max(relative_errors(found.effects_[0].values, {"D": drag})) < 0.05
+    (strikes,) = [r for r in found.left_out_ if r["reason"] == "ground strike"]
+    assert 0.5 < strikes["seconds"] < 3.0
+    (note,) = [n for n in found.notes_ if "struck the ground" in n]
+    assert "struck the ground 2 times" in note and "flew on" in note
+    assert any(limit["effects"] == ["ground_effect"] and "touched the ground" in limit["reason"]
+               for limit in found.limits_)
+
+
 def test_an_affine_thrust_map_is_one_candidate(tmp_path):
     """The rotors produce 0.9 x command - 1.2 N: one candidate of two parameters, not a thrust scale beside a steady
     force; the model file writes it as the library's thrust scale and a vertical steady force, and says so."""
