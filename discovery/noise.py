@@ -30,7 +30,7 @@ from scipy.optimize import nnls
 
 from discovery.residuals import FlightData, Segment, step_average_samples
 
-__all__ = ["BAND_HZ", "SLOW_HZ", "FLOOR_FACTOR", "step_residual", "noise_floor", "judged_floor", "residual_spectrum"]
+__all__ = ["BAND_HZ", "SLOW_HZ", "FLOOR_FACTOR", "TRANSIENT_RATIO", "step_residual", "noise_floor", "judged_floor", "residual_spectrum"]
 
 BAND_HZ = 2.0  # Hz: above this the per-step residual is noise (manoeuvres and effects live below ~1 Hz)
 SLOW_HZ = 0.5  # Hz: a residual varying below this varies over seconds (a changing wind, a gust)

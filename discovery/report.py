@@ -29,7 +29,9 @@ Keys:
 ``noise``
     the log's noise floor (:func:`discovery.noise.noise_floor`): ``floor_N``, the held-out rms
     force residual measurement noise and unlogged disturbances leave (a perfect model's), per
-    axis, ``floor_upper_N``, its one-sided 95 % upper bound, and the fitted noise levels.
+    axis, ``floor_upper_N``, its one-sided 95 % upper bound, the fitted noise levels, ``band_top_share`` and
+    ``filtered`` (the log's states look filtered), and ``transient_share``, the share of its spectrum segments left
+    out of the floor as transients.
 ``unexplained``
     ``null`` when the held-out residual is within :data:`~discovery.noise.FLOOR_FACTOR` times the
     noise floor's upper bound (or exceeds it by less than 0.2 % of the weight) and no regressor

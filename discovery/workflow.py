@@ -78,7 +78,7 @@ from discovery.flight_log import FlightLog
 from discovery.flights import conditions, model_on, still_air
 from discovery.form_range import fit_within_form
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG
-from discovery.noise import BAND_HZ
+from discovery.noise import BAND_HZ, TRANSIENT_RATIO
 from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction_pairs
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
@@ -291,6 +291,11 @@ class Discovery:
                 "fitted there predict; the log's states look filtered (an estimator's output), whose own errors below "
                 f"{BAND_HZ:g} Hz the noise floor cannot see: the floor ({self.noise_['floor_N']:.4f} N) is a lower bound, "
                 "and 'times the noise floor' may overstate what is left")
+        if self.noise_.get("transient_share", 0.0) > 0:
+            self.notes_.append(
+                f"{100 * self.noise_['transient_share']:.0f} % of the log's spectrum segments held a transient "
+                f"the model does not describe (more than {TRANSIENT_RATIO:g} times the typical segment's power above "
+                f"{BAND_HZ:g} Hz: a strike, a guard grazing a surface) and were left out of the noise floor")
         self.stand_ins_: list[dict] = []
         self.withheld_: dict[str, Any] | None = None
         self.form_range_: dict[str, Any] | None = None

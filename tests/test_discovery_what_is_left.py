@@ -421,6 +421,10 @@ def test_a_survey_that_strikes_the_ground_and_flies_on_has_its_strikes_left_out(
     assert "struck the ground 2 times" in note and "flew on" in note
     assert any(limit["effects"] == ["ground_effect"] and "touched the ground" in limit["reason"]
                for limit in found.limits_)
+    # a segment the floor leaves out as a transient is said
+    trimmed = [note for note in found.notes_ if "left out of the noise floor" in note]
+    assert found.noise_["transient_share"] < 0.1
+    assert len(trimmed) == (found.noise_["transient_share"] > 0)
 
 
 def test_an_affine_thrust_map_is_one_candidate(tmp_path):
