@@ -21,11 +21,12 @@ from typing import Any
 
 import numpy as np
 
+from discovery.flight_log import file_sha256
 from discovery.fly import prepare_flight
 from wall_env.model_file import FlightModel
 from wall_env.validation import read_json_object
 
-__all__ = ["load_scenario", "closed_loop_check", "scenario_match", "file_sha256", "PATH_TOLERANCE_M"]
+__all__ = ["load_scenario", "closed_loop_check", "scenario_match", "PATH_TOLERANCE_M"]
 
 PATH_TOLERANCE_M = 0.2  # m rms between the log's positions and the scenario's reference for the scenario to match
 
@@ -37,13 +38,6 @@ def load_scenario(path: str | Path) -> dict[str, Any]:
     if missing:
         raise ValueError(f"scenario file {path} lacks {missing}")
     return data
-
-
-def file_sha256(path: str | Path) -> str:
-    """The SHA-256 of a file's bytes (``wall-inspector fly`` records its log's in the scenario file)."""
-    import hashlib
-
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def scenario_match(scenario: dict[str, Any], log, log_path: str | Path | None = None) -> tuple[list[str], bool]:

@@ -39,7 +39,6 @@ held-out residual and score, so that no effect set is fitted twice.
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -48,11 +47,11 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from discovery.layout import ParameterLayout
-from discovery.residuals import FlightData, step_average_samples
-from wall_env.aero import AeroModel
+from discovery.residuals import FlightData
+from discovery.terms import EffectTerm, Term
 from wall_env.effects import Effect, make_effect
 
-__all__ = ["CV_TOL", "STARTS", "Term", "EffectTerm", "EffectFit", "FitResult", "Candidate", "Fitter", "applicable",
+__all__ = ["CV_TOL", "STARTS", "EffectFit", "FitResult", "Candidate", "Fitter", "applicable",
            "term_key", "hac_lags"]
 
 # Starting points for effects whose force is not affine in their parameters (plausible
@@ -85,121 +84,12 @@ def hac_lags(segment) -> int:
     return segment.hac_lags()
 
 
-class Term(ABC):
-    """One effect's contribution ``K[F(theta)]`` per segment of ``data`` (what :class:`EffectFit` sums).
-
-    A term gives its force per step (:meth:`steps`) and, with its Jacobian, at the fit rows
-    (:meth:`at_rows`); its force at every sample (:meth:`smoothed`) is the steps through each
-    segment's kernel. ``affine`` says the Jacobian does not depend on ``theta``.
-    """
-
-    data: FlightData
-    size: int
-    low: np.ndarray
-    high: np.ndarray
-    affine: bool
-
-    @abstractmethod
-    def at_rows(self, segment: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``K[F]`` ``(m, 3)`` and its Jacobian ``(m, 3, size)`` at the segment's fit rows."""
-
-    @abstractmethod
-    def steps(self, segment: int, theta: np.ndarray) -> np.ndarray:
-        """``F`` averaged over each step ``(n - 1, 3)`` (unsmoothed: what the per-step residual of
-        :func:`discovery.noise.step_residual` holds of it); ``theta`` ``(size,)`` or one row per sample."""
-
-    def smoothed(self, segment: int, theta: np.ndarray) -> np.ndarray:
-        """``K[F]`` ``(n, 3)`` at every sample: :meth:`steps` through the segment's kernel."""
-        return self.data.segments[segment].kernel.step_average(self.steps(segment, theta))
-
-    def fold_fixed(self, theta: np.ndarray, train: list[np.ndarray], held: list[np.ndarray]) -> np.ndarray:
-        """Entries a cross-validation fold must hold at their defaults (nuisance parameters that reach
-        its held-out rows ``held``); a term without nuisance parameters holds none."""
-        return np.zeros(self.size, dtype=bool)
-
-
-class EffectTerm(Term):
-    """A library effect's ``K[F(theta)]`` at every segment's fit rows, through its CasADi function, with caching."""
-
-    def __init__(self, data: FlightData, effect: Effect):
-        self.data = data
-        self.effect = effect
-        self.model = AeroModel([effect])
-        self.size = effect.param_size
-        self.low, self.high = effect.param_bounds()
-        self._evaluators = [seg.evaluator(self.model, data.rotor_positions_body) for seg in data.segments]
-        self._active = [effect.applies_to(seg.scene.structure) for seg in data.segments]
-        self._cache: dict[int, tuple[bytes, tuple[np.ndarray, np.ndarray]]] = {}
-        self.affine = False
-        self._affine_base: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
-        self._check_affine()
-
-    def _sample_mask(self, s: int) -> np.ndarray | None:
-        """Which samples of segment ``s`` the effect acts on (``None``: all of them)."""
-        return None
-
-    def _evaluate(self, s: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        seg = self.data.segments[s]
-        rows = seg.fit_rows
-        if not self._active[s]:
-            return np.zeros((len(rows), 3)), np.zeros((len(rows), 3, self.size))
-        f, j = self._evaluators[s].force_and_jacobian(seg.states, theta)
-        mask = self._sample_mask(s)
-        if mask is not None:
-            f, j = f * mask[:, None], j * mask[:, None, None]
-        return seg.smooth_force(f, rows), seg.smooth_force(j, rows)
-
-    def _check_affine(self) -> None:
-        """An effect is affine if its Jacobian is the same at two distant parameter values."""
-        a = np.clip(self.effect.param_vector(), self.low, self.high)
-        span = np.where(np.isfinite(self.high - self.low), self.high - self.low, 1.0)
-        b = np.clip(a + 0.137 * span + 0.01, self.low, self.high)
-        at_a = [self._evaluate(s, a) for s in range(len(self.data.segments))]
-        at_b = [self._evaluate(s, b) for s in range(len(self.data.segments))]
-        scale = max(max((np.abs(j).max() if j.size else 0.0) for _, j in at_a), 1e-12)
-        if all(np.allclose(ja, jb, rtol=1e-9, atol=1e-9 * scale) for (_, ja), (_, jb) in zip(at_a, at_b)):
-            self.affine = True
-            self._affine_base = [(f, j, a) for f, j in at_a]
-
-    def at_rows(self, segment: int, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        theta = np.asarray(theta, dtype=float)
-        if self._affine_base is not None:
-            f, j, a = self._affine_base[segment]
-            return f + j @ (theta - a), j
-        key = theta.tobytes()
-        cached = self._cache.get(segment)
-        if cached is None or cached[0] != key:
-            cached = (key, self._evaluate(segment, theta))
-            self._cache[segment] = cached
-        return cached[1]
-
-    def steps(self, segment: int, theta: np.ndarray) -> np.ndarray:
-        seg = self.data.segments[segment]
-        if not self._active[segment]:
-            return np.zeros((seg.n - 1, 3))
-        force = self._evaluators[segment].force(seg.states, theta)
-        mask = self._sample_mask(segment)
-        return step_average_samples(force if mask is None else force * mask[:, None])
-
-
 def make_term(data: FlightData, effect: Effect) -> Term:
-    """The term that evaluates ``effect`` on ``data``: a library effect through its CasADi function, and
-    discovery's own candidates (a motor lag, an affine thrust map, a residual's structure, a wall that ends)
-    through theirs."""
-    from discovery.motor_lag import LagTerm, MotorLag
-    from discovery.standins import Structure, StructureTerm
-    from discovery.thrust_map import ThrustMap, ThrustMapTerm
-    from discovery.wall_extent import BoundedWall, BoundedWallTerm
-
-    if isinstance(effect, BoundedWall):
-        return BoundedWallTerm(data, effect)
-    if isinstance(effect, MotorLag):
-        return LagTerm(data, effect)
-    if isinstance(effect, ThrustMap):
-        return ThrustMapTerm(data, effect)
-    if isinstance(effect, Structure):
-        return StructureTerm(data, effect)
-    return EffectTerm(data, effect)
+    """The term that evaluates ``effect`` on ``data``: discovery's own candidates (a motor lag, an affine thrust
+    map, a residual's structure, a wall that ends) build theirs (``effect.fitting_term(data)``); a library effect
+    is evaluated through its CasADi function (:class:`~discovery.terms.EffectTerm`)."""
+    own = getattr(effect, "fitting_term", None)
+    return own(data) if own is not None else EffectTerm(data, effect)
 
 
 @dataclass

@@ -97,6 +97,7 @@ __all__ = [
     "write_log",
     "sidecar_path",
     "scenario_path",
+    "file_sha256",
     "parse_sidecar",
     "csv_output_problem",
     "read_vehicle_and_scene",
@@ -313,6 +314,14 @@ def scenario_path(csv_path: str | Path) -> Path:
     """Where ``wall-inspector fly`` writes the ground truth of a simulated log: ``<name>.scenario.json``."""
     path = Path(csv_path)
     return path.with_name(path.stem + ".scenario.json")
+
+
+def file_sha256(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes: ``wall-inspector fly`` records its log's in the scenario file, and the
+    closed-loop check compares it before it calls that world the log's ground truth."""
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 # ====================================================================== reading

@@ -44,7 +44,14 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 import wall_env  # noqa: F401  (registers the environments)
-from discovery.flight_log import FlightLog, NominalVehicle, csv_output_problem, scenario_path, write_log
+from discovery.flight_log import (
+    FlightLog,
+    NominalVehicle,
+    csv_output_problem,
+    file_sha256,
+    scenario_path,
+    write_log,
+)
 from discovery.scenarios import SCENARIOS, Retarget, survey_for
 from wall_env.effects import Effect, effects_from_spec
 from wall_env.vehicle import VehicleParams
@@ -308,8 +315,6 @@ def fly(env_id: str | None = None, policy: str = "pid", effects: Any = None, see
         truth = scenario_path(csv_path)
         if truth.exists() and not overwrite:
             raise FileExistsError(f"{truth} exists; pass overwrite=True (or --overwrite) to replace it")
-        from discovery.closed_loop import file_sha256
-
         record["log_sha256"] = file_sha256(csv_path)  # the closed-loop check calls this world ground truth of that log
         truth.write_text(json.dumps(record, indent=2) + "\n")
         summary["files"] = [str(csv_path), str(json_path), str(truth)]

@@ -35,8 +35,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from discovery.fitting import Term
 from discovery.residuals import FlightData
+from discovery.terms import Term
 from wall_env.effects import Effect, FlightContext, Parameter, Wrench
 from wall_env.motor_lag import held_command_response
 
@@ -79,6 +79,10 @@ class MotorLag(Effect):
 
     def wrench(self, ctx: FlightContext, theta: dict[str, ca.SX]) -> Wrench:
         raise TypeError("a motor lag is the vehicle's motor_time_constant (rotor state), not an aerodynamic wrench")
+
+    def fitting_term(self, data: FlightData) -> LagTerm:
+        """The lag's force on ``data`` as the fit sums it (:func:`discovery.fitting.make_term`)."""
+        return LagTerm(data, self)
 
 
 class LagTerm(Term):

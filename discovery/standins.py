@@ -33,9 +33,10 @@ from typing import Any
 
 import numpy as np
 
-from discovery.fitting import Candidate, Fitter, Term
+from discovery.fitting import Candidate, Fitter
 from discovery.regressors import Regressor
 from discovery.residuals import FlightData, step_average_samples
+from discovery.terms import Term
 from wall_env.effects import Effect, FlightContext, Parameter, Wrench
 
 __all__ = ["Structure", "StructureTerm", "structure_for", "structures_for", "test_effect", "own_quantity", "depends_on",
@@ -80,9 +81,13 @@ class Structure(Effect):
     def wrench(self, ctx: FlightContext, theta: dict[str, Any]) -> Wrench:
         raise TypeError("a structure is a description of a residual, not a force on the vehicle")
 
+    def fitting_term(self, data: FlightData) -> StructureTerm:
+        """The structure's force on ``data`` as the fit sums it (:func:`discovery.fitting.make_term`)."""
+        return StructureTerm(data, self)
+
 
 class StructureTerm(Term):
-    """``K[sum_j c_j b_j]`` per segment; affine (see :class:`discovery.fitting.Term`)."""
+    """``K[sum_j c_j b_j]`` per segment; affine (see :class:`discovery.terms.Term`)."""
 
     affine = True
 

@@ -27,8 +27,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from discovery.fitting import Term
 from discovery.residuals import FlightData, step_average_samples
+from discovery.terms import Term
 from wall_env.effects import Effect, FlightContext, Parameter, ThrustScale, Wrench, make_effect
 
 __all__ = ["ThrustMap", "ThrustMapTerm", "OFFSET", "make_candidate", "written_effects", "WRITTEN_NOTE"]
@@ -59,6 +59,10 @@ class ThrustMap(ThrustScale):
         return Wrench.from_rotor_thrust_changes(
             ctx, [(theta["scale"] - 1.0) * ctx.rotor_thrusts[j] + theta["offset"] / 4.0 for j in range(4)])
 
+    def fitting_term(self, data: FlightData) -> ThrustMapTerm:
+        """The map's force on ``data`` as the fit sums it (:func:`discovery.fitting.make_term`)."""
+        return ThrustMapTerm(data, self)
+
 
 def make_candidate(name: str, **options) -> Effect:
     """A library effect by name, or the thrust map for ``thrust_scale`` with the ``affine`` option."""
@@ -69,7 +73,7 @@ def make_candidate(name: str, **options) -> Effect:
 
 class ThrustMapTerm(Term):
     """``K[((scale - 1) T + offset) z_body]`` per segment; affine, so evaluated once (see
-    :class:`discovery.fitting.Term`). ``T`` is the rotor thrust the nominal model takes as produced."""
+    :class:`discovery.terms.Term`). ``T`` is the rotor thrust the nominal model takes as produced."""
 
     affine = True
 

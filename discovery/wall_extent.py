@@ -23,8 +23,8 @@ import math
 
 import numpy as np
 
-from discovery.fitting import EffectTerm
 from discovery.residuals import FlightData
+from discovery.terms import EffectTerm
 from wall_env.effects import Effect, WallSuction, make_effect
 
 __all__ = ["BoundedWall", "BoundedWallTerm", "find_edge", "side_gains", "plain_wall", "OUTSIDE_GAIN", "INSIDE_GAIN"]
@@ -51,6 +51,10 @@ class BoundedWall(WallSuction):
         o = self.option_values
         what = "height" if o["axis"] == "height" else "position along wall 0"
         return f"the wall is where the vehicle's {what} is {o['side']} {o['edge_m']:.3g} m"
+
+    def fitting_term(self, data: FlightData) -> BoundedWallTerm:
+        """The suction on the wall's side only, on ``data``, as the fit sums it (:func:`discovery.fitting.make_term`)."""
+        return BoundedWallTerm(data, self)
 
 
 def plain_wall(effect: Effect) -> Effect:
