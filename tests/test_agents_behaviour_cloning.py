@@ -125,7 +125,8 @@ def test_training_with_a_warm_start_records_it_and_counts_its_time(tmp_path):
 def test_the_command_line_flag_sets_the_controller_and_is_recorded_in_the_command():
     import argparse
 
-    from wall_inspector.train import _command, _config_from_args, add_arguments
+    from wall_inspector.train import add_arguments
+    from wall_inspector.train_arguments import _command, _config_from_args
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)

@@ -125,7 +125,7 @@ def test_refuses_to_overwrite_a_run(cli_run, capsys):
 def _stopped_early(out, argv):
     """A run folder as a run leaves it when it dies before its first checkpoint: its configuration, an empty
     TensorBoard folder, no model (what ``train --seed -1`` once left, or a Ctrl-C while its envs were built)."""
-    from wall_inspector.train import _config_from_args, _training_arguments
+    from wall_inspector.train_arguments import _config_from_args, _training_arguments
 
     parser = __import__("argparse").ArgumentParser()
     _training_arguments(parser)

@@ -73,7 +73,7 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
     from agents import train as agents_train
     from agents.config import apply_overrides
     from wall_env.validation import check_output_folder
-    from wall_inspector.train import _command, _config_from_args
+    from wall_inspector.train_arguments import _command, _config_from_args
     from wall_inspector.tune import parse_seeds
 
     if not args.out:
