@@ -30,7 +30,8 @@ from scipy.optimize import nnls
 
 from discovery.residuals import FlightData, Segment, step_average_samples
 
-__all__ = ["BAND_HZ", "SLOW_HZ", "FLOOR_FACTOR", "TRANSIENT_RATIO", "step_residual", "noise_floor", "judged_floor", "residual_spectrum"]
+__all__ = ["BAND_HZ", "SLOW_HZ", "FLOOR_FACTOR", "TRANSIENT_RATIO", "step_residual", "noise_floor", "judged_floor",
+           "residual_spectrum"]
 
 BAND_HZ = 2.0  # Hz: above this the per-step residual is noise (manoeuvres and effects live below ~1 Hz)
 SLOW_HZ = 0.5  # Hz: a residual varying below this varies over seconds (a changing wind, a gust)
@@ -43,9 +44,10 @@ Z_UPPER_95 = 1.645  # standard normal quantile of a one-sided 95 % bound
 #: a log whose per-step residual has, at the top quarter of the band, less than this share of the power the two
 #: noise shapes fitted predict (on its weakest axis) has noise that falls with frequency: filtered states
 FILTERED_SHARE = 0.5
-#: a Welch segment whose power in the band is more than this many times the median segment's, on any axis, holds a
-#: transient the model does not describe (a guard grazing a wall on each pass, a strike), not the log's stationary
-#: noise: it is left out of the floor. The band power of a segment of noise alone scatters by about 15 %.
+#: a Welch segment whose power in the band, bin by bin against the typical segment's, is more than this many times
+#: the typical segment's on any axis (:func:`_stationary`) holds a transient the model does not describe (a guard
+#: grazing a wall on each pass, a strike), not the log's stationary noise: it is left out of the floor. Over 20
+#: draws of stationary noise through a real segment's kernel, none was.
 TRANSIENT_RATIO = 2.0
 
 
