@@ -91,6 +91,7 @@ def test_a_learner_without_a_log_folder_writes_nothing_to_the_temp_dir(tmp_path,
     from agents.learner import make_ppo
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)  # the test session's own folder (conftest) would hide it
     config = apply_overrides(default_config("WallHover"), ["n_envs=2", "ppo.n_steps=32", "ppo.batch_size=64",
                                                            "ppo.n_epochs=1", "env_kwargs.duration=0.5"])
     model = make_ppo(config, VecNormalize(make_vec_env(config, 2, vector="batched")), None)
