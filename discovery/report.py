@@ -14,7 +14,7 @@ Keys:
     or one effect was fitted alone), else the lag fitted next to the chosen effects
     (:mod:`discovery.motor_lag`): ``{"time_constant_s", "std_s", "interval_95_share", "to_narrow",
     "explained", "force_rms_N", "kept", "reason", "determined", "moves", "effect_std"}`` (``interval_95_share``:
-    the 95 % interval's half-width as a share of the time constant; ``to_narrow``: the manoeuvre
+    the largest error the 95 % interval allows, as a share of the true time constant; ``to_narrow``: the manoeuvre
     that determines it better when that share is above 10 %, else ``null``; ``moves``: the chosen
     parameter the lag would change most, when by more than 5 % and two standard errors; ``effect_std``: each chosen
     effect's standard errors fitted beside the lag). A kept lag is the model file's vehicle ``motor_time_constant``,
@@ -59,7 +59,7 @@ Keys:
     fitted on everything and (when ``applied``) without them, or why the fit on everything was kept.
 ``loose``
     the written parameters the flight pins only loosely (:func:`discovery.determination.loose_parameters`): each
-    entry whose 95 % interval is wider than 10 % of the parameter on either side, as ``{"effect", "parameter",
+    entry whose 95 % interval allows an error of more than 10 % of the parameter's true value, as ``{"effect", "parameter",
     "value", "std", "interval_95_share", "manoeuvre"}``, the manoeuvre being the one that narrows it.
 ``vehicle_fields``
     where each field of the model file's vehicle came from: given in the vehicle block, derived from it,

@@ -382,9 +382,10 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
     smaller, one price short, and D[2] 23 % low without it). Next to a structure the effects leave,
     neither relaxation is trusted (a 94 ms lag was kept beside a force growing with height).
     Returns ``{"time_constant_s", "std_s", "interval_95_share", "to_narrow", "explained",
-    "force_rms_N", "kept", "reason", "determined", "moves", "effect_std"}`` (``interval_95_share``: the 95 %
-    interval's half-width as a share of the time constant; ``to_narrow``: the manoeuvre that
-    determines it better, when that share is above :data:`~discovery.determination.NARROW_INTERVAL_SHARE`, else None;
+    "force_rms_N", "kept", "reason", "determined", "moves", "effect_std"}`` (``interval_95_share``: the largest
+    error the 95 % interval allows, as a share of the true time constant
+    (:func:`~discovery.determination.interval_share`); ``to_narrow``: the manoeuvre that determines it better,
+    when that share is above :data:`~discovery.determination.NARROW_INTERVAL_SHARE`, else None;
     ``explained``: the share of the nominal held-out energy it adds to the chosen effects, on the
     rows past the starts;
     ``force_rms_N``: the force it accounts for; ``determined``: its interval is away from zero
@@ -406,7 +407,7 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
     weight, fitted as 29.6 +- 2.2 ms) left the ground effect's distance offset 12.5 % low, 3.0 %
     with the lag known.
     """
-    from discovery.determination import MANOEUVRES, NARROW_INTERVAL_SHARE, Z_95, undetermined_cases
+    from discovery.determination import MANOEUVRES, NARROW_INTERVAL_SHARE, interval_share, undetermined_cases
 
     scale = [float(e.values["scale"][0]) for e in current.fit.effects if e.name == "thrust_scale"]
     template = MotorLag(segments=len(fitter.data.segments), thrust_scale=scale[0] if scale else 1.0)
@@ -445,7 +446,7 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
         reason = ""
     nominal_mse = _scored_on(fitter, nominal, clear)[1]
     explained = (without[1] - with_lag[1]) / nominal_mse if nominal_mse > 0 else 0.0
-    share = Z_95 * tau_std / tau if tau > 0 else math.inf
+    share = interval_share(tau, tau_std) if tau > 0 else math.inf
     to_narrow = MANOEUVRES[(LAG_KEY, "time_constant")] if share > NARROW_INTERVAL_SHARE else None
     joint_std = {e.name: std for e, std in zip(cand.fit.effects[:-1], cand.fit.std_dicts()[:-1])}
     return {"time_constant_s": tau, "std_s": tau_std, "interval_95_share": share, "to_narrow": to_narrow,

@@ -62,7 +62,8 @@ def test_a_motor_lag_from_another_simulator_is_found_and_leaves_the_vertical_dra
     lag = found.motor_lag_
     assert lag["kept"] and lag["time_constant_s"] == pytest.approx(0.03, rel=0.1)
     assert lag["time_constant_s"] > 3 * lag["std_s"]
-    assert lag["interval_95_share"] == pytest.approx(1.96 * lag["std_s"] / lag["time_constant_s"])
+    half = 1.96 * lag["std_s"]  # the largest error the 95 % interval allows, against the true lag at its near end
+    assert lag["interval_95_share"] == pytest.approx(half / (lag["time_constant_s"] - half))
     assert (lag["to_narrow"] is not None) == (lag["interval_95_share"] > 0.1)
     assert found.model_.vehicle.motor_time_constant == lag["time_constant_s"]
     assert max(relative_errors(found.effects_[0].values, {"D": D})) < 0.1
@@ -357,6 +358,18 @@ def test_a_start_error_is_never_fitted_to_the_rows_it_is_scored_on(tmp_path):
     assert others == pytest.approx([float(full.theta[1])] * 4, rel=0.05)
 
 
+def test_the_share_a_95_percent_interval_allows_is_taken_against_the_true_value():
+    """Seed 7900 fitted a 30 ms lag as 33.0 +- 1.66 ms: against the estimate its 95 % interval is +-9.8 %, and no
+    manoeuvre was offered, yet it was 10.1 % off. Against the true value at the interval's near end the interval allows
+    10.9 %: more than 10 %, so the report says how to narrow it. An interval that reaches zero allows any error."""
+    from discovery.determination import NARROW_INTERVAL_SHARE, interval_share
+
+    assert 1.96 * 1.66 / 33.04 < NARROW_INTERVAL_SHARE < interval_share(33.04, 1.66)
+    assert interval_share(33.04, 1.66) == pytest.approx(0.109, abs=0.001)
+    assert abs(33.04 - 30.0) / 30.0 < interval_share(33.04, 1.66)
+    assert interval_share(1.0, 0.6) == float("inf")
+
+
 @pytest.mark.parametrize("std_s, says", [(0.0009, False), (0.0019, True)])
 def test_a_lag_the_flight_determines_loosely_is_given_with_its_interval_and_the_manoeuvre(std_s, says):
     """One minute of a climb and descent at one pace determines a 30 ms lag to about 6 % (one standard error): the
@@ -364,7 +377,7 @@ def test_a_lag_the_flight_determines_loosely_is_given_with_its_interval_and_the_
     from discovery.determination import MANOEUVRES
     from discovery.report import format_summary
 
-    share = 1.96 * std_s / 0.031
+    share = 1.96 * std_s / (0.031 - 1.96 * std_s)
     lag = {"time_constant_s": 0.031, "std_s": std_s, "interval_95_share": share,
            "to_narrow": MANOEUVRES[("motor_lag", "time_constant")] if share > 0.1 else None,
            "explained": 0.01, "force_rms_N": 0.02, "kept": True, "reason": "", "determined": True, "moves": None}
@@ -373,7 +386,7 @@ def test_a_lag_the_flight_determines_loosely_is_given_with_its_interval_and_the_
               "gap_after": {"force_rms_N": 0.024, "prediction_rms_m": 0.005}, "noise": {"floor_N": 0.023}}
     text = format_summary(report)
     assert "found a motor lag: time_constant=0.031 +- " in text
-    assert ("determines the motor lag only to +-12 % (95 % interval); to narrow it: climb and descend in steps "
+    assert ("determines the motor lag only to +-14 % (95 % interval); to narrow it: climb and descend in steps "
             "of different lengths" in text) == says
 
 
