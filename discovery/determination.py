@@ -38,18 +38,10 @@ __all__ = ["Z_95", "CHI2_2_95", "NARROW_INTERVAL_SHARE", "interval_share", "NULL
 
 Z_95 = 1.96
 CHI2_2_95 = 5.991  # the chi-square distribution's 95 % point with two degrees of freedom (-2 ln 0.05)
-#: a written parameter whose 95 % interval is wider than this share of its value on either side is reported with the
-#: manoeuvre that narrows it (the acceptance figures ask parameters within 10 %)
+#: a written parameter whose 95 % interval allows an error of more than this share of its true value
+#: (:func:`interval_share`) is reported with the manoeuvre that narrows it (the acceptance figures ask parameters
+#: within 10 %)
 NARROW_INTERVAL_SHARE = 0.10
-
-
-def interval_share(size: float, std: float) -> float:
-    """The largest error, as a share of the true value, that a 95 % interval of half-width ``Z_95 std`` around an
-    estimate of size ``size`` allows: ``Z_95 std / (size - Z_95 std)``, the truth at the interval's near end (inf
-    when the interval reaches zero). Taken against the estimate, ``Z_95 std / size``, it understates the error of
-    an estimate that came out high: a motor lag of 33.0 +- 1.66 ms was "+-9.8 %" and 10.1 % off the true 30 ms."""
-    half = Z_95 * std
-    return half / (size - half) if size > half else math.inf
 NULL_VALUES = {"k_s": 0.0, "d_thr": 0.0, "D": 0.0, "C": 0.0, "F": 0.0, "w": 0.0, "scale": 1.0, "radius": 0.0,
                "time_constant": 0.0}
 #: null values of parameters whose name means something else in another effect (an affine thrust map's offset, N,
@@ -76,15 +68,24 @@ MANOEUVRES = {
 }
 
 
+def interval_share(size: float, std: float) -> float:
+    """The largest error, as a share of the true value, that a 95 % interval of half-width ``Z_95 std`` around an
+    estimate of size ``size`` allows: ``Z_95 std / (size - Z_95 std)``, the truth at the interval's near end (inf
+    when the interval reaches zero). Taken against the estimate, ``Z_95 std / size``, it understates the error of
+    an estimate that came out high: a motor lag of 33.0 +- 1.66 ms was "+-9.8 %" and 10.1 % off the true 30 ms."""
+    half = Z_95 * std
+    return half / (size - half) if size > half else math.inf
+
+
 def loose_parameters(effects: list[Effect], stds: list[dict]) -> list[dict]:
     """Determined parameters the flight pins only loosely: each entry whose 95 % interval allows an error of more than
-    :data:`NARROW_INTERVAL_SHARE` of the parameter's true size (:func:`interval_share`), as ``{"effect", "parameter", "value", "std",
-    "interval_95_share", "manoeuvre"}``. The size is the value; a vector's length for a vector along the world axes
-    (a force, a wind: its direction is the frame's); each entry's own value for one coefficient per body axis
-    (:attr:`~wall_env.effects.base.Parameter.frame` ``"body"``: a drag along body z is its own quantity, and
-    measured against the drag vector's length a vertical drag of 0.44 +- 0.026 N s/m, +-12 %, passed as +-10 %). A
-    hold at one height, for instance, pins a ground effect's gain there and only loosely how it splits between the
-    radius and the distance offset."""
+    :data:`NARROW_INTERVAL_SHARE` of the parameter's true size (:func:`interval_share`), as ``{"effect",
+    "parameter", "value", "std", "interval_95_share", "manoeuvre"}``. The size is the value; a vector's length for a
+    vector along the world axes (a force, a wind: its direction is the frame's); each entry's own value for one
+    coefficient per body axis (:attr:`~wall_env.effects.base.Parameter.frame` ``"body"``: a drag along body z is its
+    own quantity, and measured against the drag vector's length a vertical drag of 0.44 +- 0.026 N s/m, +-12 %,
+    had passed as +-10 %). A hold at one height, for instance, pins a ground effect's gain there and only loosely how it
+    splits between the radius and the distance offset."""
     out = []
     for effect, p, value, error in _entries(effects, stds):
         sizes = np.abs(value) if p.frame == "body" else np.full(value.size, float(np.linalg.norm(value)))

@@ -59,8 +59,8 @@ Keys:
     fitted on everything and (when ``applied``) without them, or why the fit on everything was kept.
 ``loose``
     the written parameters the flight pins only loosely (:func:`discovery.determination.loose_parameters`): each
-    entry whose 95 % interval allows an error of more than 10 % of the parameter's true value, as ``{"effect", "parameter",
-    "value", "std", "interval_95_share", "manoeuvre"}``, the manoeuvre being the one that narrows it.
+    entry whose 95 % interval allows an error of more than 10 % of the parameter's true value, as ``{"effect",
+    "parameter", "value", "std", "interval_95_share", "manoeuvre"}``, the manoeuvre being the one that narrows it.
 ``vehicle_fields``
     where each field of the model file's vehicle came from: given in the vehicle block, derived from it,
     found (a motor lag), or defaulted (the paper vehicle's value; the log says nothing about it).
