@@ -352,7 +352,8 @@ class EffectFit:
         return out
 
     def steps(self, theta: np.ndarray, segment: int) -> np.ndarray:
-        """The effects' summed force over each step of ``segment`` ``(n - 1, 3)``, unsmoothed (:meth:`discovery.terms.Term.steps`)."""
+        """The effects' summed force over each step of ``segment`` ``(n - 1, 3)``, unsmoothed
+        (:meth:`discovery.terms.Term.steps`)."""
         flight = self.data.segments[segment].flight
         parts = self.layout.split(theta, flight)
         return sum((term.steps(segment, parts[e]) for e, term in enumerate(self.terms)),

@@ -212,8 +212,7 @@ def noise_floor(data: FlightData, model_steps: Callable[[int], np.ndarray] | Non
     reach above the band's edge, and measured on what the nominal model leaves, the floor of the second simulator's
     waypoint flights came out 3.7 times the residual a right quadratic drag left and 2.1 times a thrust scale's; on
     what they leave, 0.86 and 0.85 times."""
-    floors, weights, whites, differenced, variances, shares = [], [], [], [], [], []
-    transients = []
+    floors, weights, whites, differenced, variances, shares, transients = [], [], [], [], [], [], []
     for index, seg in enumerate(data.segments):
         dt = seg.dt
         length = max(64, int(round(_WELCH_S / dt)))

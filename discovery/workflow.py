@@ -874,7 +874,6 @@ class Discovery:
         declared = np.logical_or.reduce([np.zeros(log.n_samples, dtype=bool), *by_reason.values()])
         excluded = held | declared
         for struck in undeclared_strikes(log, excluded):
-            in_contact = with_held(struck.in_contact & ~declared)
             scene_surface = declared_surface(log, struck)
             if scene_surface is not None:  # strikes the test on the scene's plane missed: the scene has it
                 off = float(np.degrees(np.arccos(np.clip(struck.normal @ scene_surface.normal, -1.0, 1.0))))
@@ -882,6 +881,7 @@ class Discovery:
                                  f"along {normal_text(struck.normal)} (world), {off:.0f} degrees off its normal (a "
                                  "guard sliding along it pushes along it too),")
                 continue
+            in_contact = with_held(struck.in_contact & ~declared)
             reason = UNDECLARED_CONTACT
             by_reason[reason] = by_reason.get(reason, np.zeros(log.n_samples, dtype=bool)) | in_contact
             normal = normal_text(struck.normal)
