@@ -31,6 +31,16 @@ smoothed over more than the jolt's window (a filtered motion-capture derivative,
 a strike too thin to find, and the contact is then fitted as a pull too weak. Log the
 acceleration (``ax, ay, az``) when the vehicle may touch a surface.
 
+A vehicle that comes at a wall slowly enough strikes it too softly to find, and the wall's suction may then hold
+it against the wall as it flies on along it. What gives it away is friction: the guards sliding along the surface
+hold the vehicle back against its sliding, and only at its closest approach. :func:`slid_along` measures the
+acceleration along the surface's plane beyond the thrust's and gravity's, less a per-axis fit of it on the in-plane
+velocity (constant, linear and quadratic: a steady wind and drag) over the samples away from the closest approach,
+and takes the component against the sliding. Half a second or more of sliding within :data:`SAME_DISTANCE` of the
+closest approach, held back by at least :data:`RUB_MIN` and :data:`RUB_Z` times that component's own scatter away
+from it, marks the surface as touched; flown past at a few centimetres without touching, the same component is zero
+within its scatter (no aerodynamic effect near a wall or a ceiling acts along it only at the closest approach).
+
 A vehicle whose loop drives it on into a surface it cannot pass (a ceiling above its reference,
 the integrator winding the thrust up to twice the weight) may strike it once and then stay
 pressed there. :func:`pressed_against` finds that the way a rest on the ground is found: over
@@ -66,7 +76,7 @@ from discovery.flight_log import FlightLog
 from discovery.regressors import rotor_centres_world, surface_clearances
 
 __all__ = ["Strikes", "surface_strikes", "ground_strikes", "undeclared_strikes", "declared_surface", "outward_jolt",
-           "jolt_jump", "pressed_against", "normal_text", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES", "SAME_DISTANCE",
+           "jolt_jump", "pressed_against", "slid_along", "normal_text", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES", "SAME_DISTANCE",
            "CONTACT_MARGIN", "UNDECLARED_CONTACT", "UNDECLARED_DIRECTIONS"]
 
 STRIKE_WINDOW_S = 0.03  # s: a guard stops the vehicle in about this long; the loop's braking takes hundreds of ms
@@ -79,6 +89,15 @@ APPROACH_SHARE = 0.5  # of the speed a jolt takes away, the least the vehicle ca
 PINNED_S = 1.0  # s: one strike suffices when the vehicle then stays this long within the contact distance
 PINNED_SHARE = 0.9  # of the samples over PINNED_S
 PRESSED_S = 0.5  # s of being pressed against a surface, in all, before it is taken to be touched
+RUB_WINDOW_S = 0.25  # s: the in-plane acceleration and velocity friction is read from are averaged over this long
+SLIDE_SPEED = 0.05  # m/s: the least speed along the surface's plane that counts as sliding along it
+#: m/s^2: the least hold-back against the sliding (beyond thrust, gravity and drag) taken for friction. Guards that
+#: touched a wall held the vehicles of the second simulator back by 0.6-4.9 m/s^2; flown past at 2-6 cm without
+#: touching, by at most 0.07 (in 78 logs)
+RUB_MIN = 0.2
+#: robust standard deviations of the hold-back away from the closest approach; touching gave 14-130, not touching
+#: at most 1.9 with half a second or more of sliding
+RUB_Z = 6.0
 SCATTER_FLOOR = 0.05  # m/s^2: the least scatter a jolt is measured against (a noise-free simulated log has none)
 ONSET_Z = 2.0  # robust standard deviations: a strike's push began where its jump last rose above this
 UNDECLARED_CONTACT = "contact with a surface not in the scene"  # the reason its samples are left out
@@ -111,6 +130,9 @@ class Strikes:
     # where the strikes stopped them; given for a surface not in the scene, whose place they are all we know of
     give: float = SAME_DISTANCE  # m: how far short of the closest approach a strike may stop (the guard gives more
     # the faster it strikes): SAME_DISTANCE and half the fastest strike's speed times STRIKE_WINDOW_S
+    slid_s: float = 0.0  # s the vehicle slid along the surface at its closest approach, held back by friction
+    # (slid_along); 0 when it was found by its strikes or by being pressed against it
+    held_back: float = 0.0  # m/s^2: the median hold-back against the sliding there (slid_along)
 
 
 def outward_jolt(log: FlightLog, normal: np.ndarray) -> np.ndarray:
@@ -142,6 +164,53 @@ def pressed_against(log: FlightLog, normal: np.ndarray) -> np.ndarray:
     when the log has one): a vehicle whose loop drives it on into a ceiling with twice its weight in thrust, and
     that does not rise. No aerodynamic effect near a wall or a ceiling pushes that way (they pull toward it)."""
     return pushed_beyond_free(log, normal, accelerometer=True)
+
+
+def _plane_axes(normal: np.ndarray) -> np.ndarray:
+    """``(3, 2)`` two orthonormal directions (world) in the plane whose unit normal is ``normal``."""
+    other = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    first = np.cross(normal, other)
+    first /= np.linalg.norm(first)
+    return np.stack([first, np.cross(normal, first)], axis=1)
+
+
+def slid_along(log: FlightLog, normal: np.ndarray, distance: np.ndarray, closest: float) -> tuple[float, float, float]:
+    """How the vehicle slid along the surface whose unit ``normal`` (into free space) it came within ``closest`` of
+    (the nearest rotor centre ``distance`` from its plane at every sample): ``(seconds, hold_back, z)``, the time it
+    slid (:data:`SLIDE_SPEED`) within :data:`SAME_DISTANCE` of the closest approach, the median acceleration against
+    its sliding there beyond thrust, gravity and the drag and wind seen away from it (m/s^2; see the module text),
+    and that in robust standard deviations of the same away from it. ``(0, 0, 0)`` when either has too few samples."""
+    dt = float(np.median(np.diff(log.t)))
+    window = max(1, int(round(RUB_WINDOW_S / dt)))
+    axes = _plane_axes(normal)
+    v_plane = moving_average(log.v_world @ axes, window)
+    if log.a_world is not None:
+        a_plane = moving_average(log.a_world @ axes, window)
+    else:
+        a_plane = np.gradient(v_plane, log.t, axis=0)
+    free = np.stack([moving_average(log.free_acceleration(axis), window) for axis in axes.T], axis=1)
+    push = a_plane - free
+    at_closest = distance < closest + SAME_DISTANCE
+    away = np.convolve(at_closest.astype(float), np.ones(2 * window + 1), mode="same") == 0
+    speed = np.linalg.norm(v_plane, axis=1)
+    sliding = speed > SLIDE_SPEED
+    if away.sum() < 10 or (away & sliding).sum() < 10:
+        return 0.0, 0.0, 0.0
+    rest = np.empty_like(push)
+    for k in range(2):  # a steady wind and drag, fitted where the surface cannot touch the vehicle
+        basis = np.stack([np.ones(log.n_samples), v_plane[:, k], v_plane[:, k] * np.abs(v_plane[:, k])], axis=1)
+        coefficients = np.linalg.lstsq(basis[away], push[away, k], rcond=None)[0]
+        rest[:, k] = push[:, k] - basis @ coefficients
+    hold_back = -np.sum(rest * v_plane, axis=1) / np.maximum(speed, 1e-9)
+    # only at speeds the fit away from the surface saw: drag extrapolated beyond them is no baseline
+    tested = at_closest & sliding & (speed <= np.percentile(speed[away], 99))
+    if not tested.any():
+        return 0.0, 0.0, 0.0
+    baseline = hold_back[away & sliding]
+    centre = float(np.median(baseline))
+    scatter = max(1e-6, 1.4826 * float(np.median(np.abs(baseline - centre))))
+    held = float(np.median(hold_back[tested]))
+    return float(tested.sum() * dt), held, (held - centre) / scatter
 
 
 def jolt_jump(jolt: np.ndarray, half: int) -> np.ndarray:
@@ -216,9 +285,26 @@ def surface_strikes(log: FlightLog) -> list[Strikes]:
         jump = jolt_jump(outward_jolt(log, normal), _half_window(log))
         struck = _strikes_on(log, surface, effect, normal, distance, closest, jump, candidates=distance > 0,
                              pressed=True)
+        if struck is None and closest > 0:
+            struck = _slid_against(log, surface, effect, normal, distance, closest)
         if struck is not None:
             out.append(struck)
     return out
+
+
+def _slid_against(log: FlightLog, surface: str, effect: str, normal: np.ndarray, distance: np.ndarray,
+                  closest: float) -> Strikes | None:
+    """The surface as touched when friction held the vehicle back as it slid along it at its closest approach
+    (:func:`slid_along`), with every sample within :data:`SAME_DISTANCE` and :data:`CONTACT_MARGIN` of the closest
+    approach in contact; None otherwise."""
+    seconds, held_back, z = slid_along(log, normal, distance, closest)
+    if seconds < PRESSED_S or held_back < RUB_MIN or z < RUB_Z:
+        return None
+    touch = closest + SAME_DISTANCE + CONTACT_MARGIN
+    pad = _strike_pad(float(np.median(np.diff(log.t))))
+    in_contact = np.convolve((distance < touch).astype(float), np.ones(2 * pad + 1), mode="same") > 0
+    return Strikes(surface=surface, effect=effect, normal=normal, times=np.zeros(0), pressed_s=0.0, closest=closest,
+                   touch_distance=touch, in_contact=in_contact, slid_s=seconds, held_back=held_back)
 
 
 def ground_strikes(log: FlightLog, excluded: np.ndarray) -> Strikes | None:

@@ -852,6 +852,11 @@ class Discovery:
                     f"was pressed against {name} for {struck.pressed_s:.1f} s: pushed away from it more than "
                     f"{NOT_FALLING:g} g beyond what the thrust and gravity do (over {HELD_WINDOW_S:g} s), as no "
                     "aerodynamic effect there pushes")
+            if struck.slid_s > 0:
+                evidence.append(
+                    f"slid along {name} for {struck.slid_s:.1f} s at its closest approach, held back against its "
+                    f"sliding by {struck.held_back:.2f} m/s^2 beyond what the thrust, gravity and the drag seen away "
+                    "from it do: friction, as no aerodynamic effect acts along it only there")
             self.notes_.append(
                 f"{log.source}: the vehicle {'; and it '.join(evidence)} (the nearest rotor centre came within "
                 f"{1e3 * struck.closest:.1f} mm of the plane). {in_contact.sum() * dt:.1f} s with a rotor centre "

@@ -9,6 +9,8 @@ import pytest
 from discovery.flight_log import FlightLog, NominalVehicle
 from discovery.surface_contact import (
     CONTACT_MARGIN,
+    RUB_MIN,
+    RUB_Z,
     SAME_DISTANCE,
     STRIKE_WINDOW_S,
     declared_surface,
@@ -16,6 +18,7 @@ from discovery.surface_contact import (
     normal_text,
     outward_jolt,
     pressed_against,
+    slid_along,
     surface_strikes,
     undeclared_strikes,
 )
@@ -348,3 +351,57 @@ def test_strikes_on_a_ceiling_the_scene_does_not_have_face_down():
     assert np.allclose(struck.normal, [0.0, 0.0, -1.0]) and len(struck.times) == 5
     assert struck.stopped_at == pytest.approx(-(CEILING_Z - STOP), abs=1e-4)  # along -z: minus the height
     assert struck.in_contact[held].all()
+
+
+def _slide_along_wall(held_back: float, seed: int = 5) -> tuple[FlightLog, np.ndarray]:
+    """30 s swinging along a wall at x = 0 (y, 0.8 m either side, period 6 s) while the distance goes out and in
+    slowly: three times the vehicle eases in over 2 s to where the nearest rotor centre is STOP from the plane, stays
+    there for 4 s and eases out to 15 cm further. Linear drag (0.3 1/s) acts all along, and the thrust makes up for
+    it. At the wall the thrust also makes up for ``held_back`` (m/s^2) against the sliding: what friction takes when
+    the guards touch; with 0 the vehicle holds itself at that distance without touching (a survey at a constant
+    standoff). The position, velocity and attitude are the same in either case. Returns the log and the samples at
+    the wall."""
+    vehicle = NominalVehicle.from_vehicle_params(VehicleParams(mass=MASS))
+    t = np.arange(int(30.0 * RATE_HZ)) / RATE_HZ
+    n = len(t)
+    phase = np.mod(t, 10.0)  # out 0-2 s, easing in 2-4 s, at the wall 4-8 s, easing out 8-10 s
+    ease = np.clip(np.where(phase < 6.0, (phase - 2.0) / 2.0, (10.0 - phase) / 2.0), 0.0, 1.0)
+    ease = 0.5 * (1 - np.cos(np.pi * ease))  # 0 far out, 1 at the wall, with no speed at either end
+    x = STOP - float(vehicle.rotor_positions_array[:, 0].min()) + 0.15 * (1.0 - ease)
+    y = 0.8 * np.sin(2 * np.pi * t / 6.0)
+    v = np.column_stack([np.gradient(x, t), np.gradient(y, t), np.zeros(n)])
+    a = np.column_stack([np.gradient(v[:, 0], t), np.gradient(v[:, 1], t), np.zeros(n)])
+    at_wall = ease >= 1.0
+    speed = np.maximum(np.linalg.norm(v, axis=1), 1e-9)
+    a_thrust = a + 0.3 * v + held_back * at_wall[:, None] * v / speed[:, None]
+    angle, axis = _tilt(a_thrust[:, 0], a_thrust[:, 1])
+    q = np.column_stack([np.cos(angle / 2), *(np.sin(angle / 2) * axis.T)])
+    rng = np.random.default_rng(seed)
+    log = FlightLog(t=t, p_world=np.column_stack([x, y, np.full(n, 1.0)]),
+                    v_world=v + rng.normal(0.0, VELOCITY_NOISE, (n, 3)), q_body_to_world=q,
+                    omega_body=np.zeros((n, 3)), thrust_cmd=MASS * np.sqrt(np.sum(a_thrust[:, :2] ** 2, axis=1) + G**2),
+                    omega_cmd_body=np.zeros((n, 3)), vehicle=vehicle,
+                    scene=Scene((Wall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)),), 0.0, None), gravity=G)
+    return log, at_wall
+
+
+def test_a_vehicle_held_back_as_it_slides_along_the_wall_touches_it_and_one_at_the_same_standoff_does_not():
+    """Eased in too slowly to strike, the vehicle slides along the wall for 12 s held back by friction (0.6 m/s^2
+    against its sliding, beyond the drag it has everywhere): the wall is touched, the hold-back is measured within
+    10 %, and the samples at the wall are in contact while those 15 cm out are not. The same flight holding itself
+    at the same distance (no friction) is not taken for contact: the drag fitted away from the wall explains it."""
+    log, at_wall = _slide_along_wall(held_back=0.6)
+    normal = np.array([1.0, 0.0, 0.0])
+    rotors = log.p_world[:, None, :] + np.einsum("nij,rj->nri", log.R_body_to_world, log.vehicle.rotor_positions_array)
+    distance = log.scene.walls[0].distance(rotors).min(axis=1)
+    assert distance.min() == pytest.approx(STOP, abs=1e-3)
+    (touched,) = surface_strikes(log)
+    assert touched.surface == "wall 0" and len(touched.times) == 0 and touched.pressed_s == 0.0
+    near = (distance < distance.min() + SAME_DISTANCE).sum() / RATE_HZ  # 12 s at the wall and the easing's ends
+    assert 6.0 < touched.slid_s <= near  # the time there sliding faster than SLIDE_SPEED
+    assert touched.held_back == pytest.approx(0.6, rel=0.1)
+    assert touched.in_contact[at_wall].all() and not touched.in_contact[distance > STOP + 0.05].any()
+    standoff, _ = _slide_along_wall(held_back=0.0)
+    seconds, held_back, z = slid_along(standoff, normal, distance, float(distance.min()))
+    assert seconds > 6.0 and abs(held_back) < RUB_MIN / 4 and abs(z) < RUB_Z / 2
+    assert surface_strikes(standoff) == []
