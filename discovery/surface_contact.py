@@ -40,6 +40,9 @@ and takes the component against the sliding. Half a second or more of sliding wi
 closest approach, held back by at least :data:`RUB_MIN` and :data:`RUB_Z` times that component's own scatter away
 from it, marks the surface as touched; flown past at a few centimetres without touching, the same component is zero
 within its scatter (no aerodynamic effect near a wall or a ceiling acts along it only at the closest approach).
+The hold-back is measured from its level just outside the contact (out to :data:`RUB_BAND`): friction begins at
+the touch, while a drag that grows toward the surface over a rotor's scale holds the vehicle back there nearly as
+much (one growing by e every 5 cm is told apart; every 3 cm or less, it is not).
 
 A vehicle whose loop drives it on into a surface it cannot pass (a ceiling above its reference,
 the integrator winding the thrust up to twice the weight) may strike it once and then stay
@@ -98,6 +101,7 @@ RUB_MIN = 0.2
 #: robust standard deviations of the hold-back away from the closest approach; touching gave 14-130, not touching
 #: at most 1.9 with half a second or more of sliding
 RUB_Z = 6.0
+RUB_BAND = 0.02  # m past the closest approach: the hold-back just outside the contact is measured out to here
 SCATTER_FLOOR = 0.05  # m/s^2: the least scatter a jolt is measured against (a noise-free simulated log has none)
 ONSET_Z = 2.0  # robust standard deviations: a strike's push began where its jump last rose above this
 UNDECLARED_CONTACT = "contact with a surface not in the scene"  # the reason its samples are left out
@@ -178,8 +182,9 @@ def slid_along(log: FlightLog, normal: np.ndarray, distance: np.ndarray, closest
     """How the vehicle slid along the surface whose unit ``normal`` (into free space) it came within ``closest`` of
     (the nearest rotor centre ``distance`` from its plane at every sample): ``(seconds, hold_back, z)``, the time it
     slid (:data:`SLIDE_SPEED`) within :data:`SAME_DISTANCE` of the closest approach, the median acceleration against
-    its sliding there beyond thrust, gravity and the drag and wind seen away from it (m/s^2; see the module text),
-    and that in robust standard deviations of the same away from it. ``(0, 0, 0)`` when either has too few samples."""
+    its sliding there beyond thrust, gravity and the drag and wind seen away from it, less the same just outside the
+    contact (out to :data:`RUB_BAND` past the closest approach; m/s^2; see the module text), and that in robust
+    standard deviations of the hold-back away from it. ``(0, 0, 0)`` when either has too few samples."""
     dt = float(np.median(np.diff(log.t)))
     window = max(1, int(round(RUB_WINDOW_S / dt)))
     axes = _plane_axes(normal)
@@ -209,8 +214,12 @@ def slid_along(log: FlightLog, normal: np.ndarray, distance: np.ndarray, closest
     baseline = hold_back[away & sliding]
     centre = float(np.median(baseline))
     scatter = max(1e-6, 1.4826 * float(np.median(np.abs(baseline - centre))))
-    held = float(np.median(hold_back[tested]))
-    return float(tested.sum() * dt), held, (held - centre) / scatter
+    # measured from just outside the contact (the next RUB_BAND), where the vehicle slid too: friction begins at the
+    # touch, while a drag that grows toward the surface (not in the library) is there as well
+    band = sliding & (distance >= closest + SAME_DISTANCE + CONTACT_MARGIN) & (distance < closest + RUB_BAND)
+    outside = float(np.median(hold_back[band])) if band.sum() >= 10 else centre
+    held = float(np.median(hold_back[tested])) - outside
+    return float(tested.sum() * dt), held, held / scatter
 
 
 def jolt_jump(jolt: np.ndarray, half: int) -> np.ndarray:
