@@ -140,8 +140,9 @@ def _surface_contact(log: FlightLog, held: np.ndarray, dt: float, notes: list[st
         if struck.slid_s > 0:
             evidence.append(
                 f"slid along {name} for {struck.slid_s:.1f} s at its closest approach, held back against its "
-                f"sliding by {struck.held_back:.2f} m/s^2 beyond what the thrust, gravity and the drag seen away "
-                "from it do: friction, as no aerodynamic effect acts along it only there")
+                f"sliding by {struck.held_back:.2f} m/s^2 more than just outside it (beyond what the thrust, "
+                "gravity and the drag seen away from it do): friction, as no aerodynamic effect acts along it only "
+                "there")
         notes.append(
             f"{log.source}: the vehicle {'; and it '.join(evidence)} (the nearest rotor centre came within "
             f"{1e3 * struck.closest:.1f} mm of the plane). {in_contact.sum() * dt:.1f} s with a rotor centre "

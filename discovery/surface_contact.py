@@ -79,8 +79,8 @@ from discovery.flight_log import FlightLog
 from discovery.regressors import rotor_centres_world, surface_clearances
 
 __all__ = ["Strikes", "surface_strikes", "ground_strikes", "undeclared_strikes", "declared_surface", "outward_jolt",
-           "jolt_jump", "pressed_against", "slid_along", "normal_text", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES", "SAME_DISTANCE",
-           "CONTACT_MARGIN", "UNDECLARED_CONTACT", "UNDECLARED_DIRECTIONS"]
+           "jolt_jump", "pressed_against", "slid_along", "normal_text", "STRIKE_WINDOW_S", "STRIKE_Z", "MIN_STRIKES",
+           "SAME_DISTANCE", "CONTACT_MARGIN", "UNDECLARED_CONTACT", "UNDECLARED_DIRECTIONS", "RUB_MIN", "RUB_Z"]
 
 STRIKE_WINDOW_S = 0.03  # s: a guard stops the vehicle in about this long; the loop's braking takes hundreds of ms
 STRIKE_Z = 4.0  # robust standard deviations of the log's jumps (jolt_jump) a strike's jump exceeds
