@@ -446,7 +446,7 @@ def _motor_lag(fitter: Fitter, current: Candidate, nominal: Candidate, price: fl
         reason = ""
     nominal_mse = _scored_on(fitter, nominal, clear)[1]
     explained = (without[1] - with_lag[1]) / nominal_mse if nominal_mse > 0 else 0.0
-    share = interval_share(tau, tau_std) if tau > 0 else math.inf
+    share = interval_share(tau, tau_std)  # inf when the interval reaches zero
     to_narrow = MANOEUVRES[(LAG_KEY, "time_constant")] if share > NARROW_INTERVAL_SHARE else None
     joint_std = {e.name: std for e, std in zip(cand.fit.effects[:-1], cand.fit.std_dicts()[:-1])}
     return {"time_constant_s": tau, "std_s": tau_std, "interval_95_share": share, "to_narrow": to_narrow,

@@ -198,7 +198,7 @@ def slid_along(log: FlightLog, normal: np.ndarray, distance: np.ndarray, closest
     free = np.stack([moving_average(log.free_acceleration(axis), window) for axis in axes.T], axis=1)
     push = a_plane - free
     at_closest = distance < closest + SAME_DISTANCE
-    away = np.convolve(at_closest.astype(float), np.ones(2 * window + 1), mode="same") == 0
+    away = ~_widened(at_closest, window)
     speed = np.linalg.norm(v_plane, axis=1)
     sliding = speed > SLIDE_SPEED
     if away.sum() < 10 or (away & sliding).sum() < 10:
@@ -313,7 +313,7 @@ def _slid_against(log: FlightLog, surface: str, effect: str, normal: np.ndarray,
         return None
     touch = closest + SAME_DISTANCE + CONTACT_MARGIN
     pad = _strike_pad(float(np.median(np.diff(log.t))))
-    in_contact = np.convolve((distance < touch).astype(float), np.ones(2 * pad + 1), mode="same") > 0
+    in_contact = _widened(distance < touch, pad)
     return Strikes(surface=surface, effect=effect, normal=normal, times=np.zeros(0), pressed_s=0.0, closest=closest,
                    touch_distance=touch, in_contact=in_contact, slid_s=seconds, held_back=held_back)
 
@@ -409,7 +409,7 @@ def declared_surface(log: FlightLog, struck: Strikes) -> Strikes | None:
                 and float(near.min()) >= 0.0 and float(near.max()) < NEAR_SURFACE):
             stops = [float(distance[max(0, i - pad):i + pad + 1].min()) for i in np.searchsorted(log.t, struck.times)]
             touch = max(stops, default=float(distance.min())) + CONTACT_MARGIN
-            nearer = np.convolve((distance < touch).astype(float), np.ones(2 * pad + 1), mode="same") > 0
+            nearer = _widened(distance < touch, pad)
             return replace(struck, surface=surface, effect=effect, normal=normal, closest=float(distance.min()),
                            touch_distance=touch, in_contact=struck.in_contact | nearer, stopped_at=None)
     return None
@@ -474,6 +474,11 @@ def _onset(jump: np.ndarray, level: float, first: int, half: int) -> np.ndarray:
     while start > 0 and np.isfinite(jump[start - 1]) and jump[start - 1] > level:
         start -= 1
     return np.arange(max(0, start - half), start + 1)
+
+
+def _widened(mask: np.ndarray, samples: int) -> np.ndarray:
+    """``mask`` with every sample within ``samples`` of one it holds set too."""
+    return np.convolve(mask.astype(float), np.ones(2 * samples + 1), mode="same") > 0
 
 
 def _strike_pad(dt: float) -> int:
@@ -541,6 +546,6 @@ def _strikes_on(log: FlightLog, surface: str, effect: str | None, normal: np.nda
     # widened by the jolt's window on each side: a stiff guard bounces the vehicle off in a sample or two, too
     # short a gap to cut the log there, and the residual's smoothing would carry the impulse into the samples
     # kept on either side
-    in_contact = np.convolve((distance < touch).astype(float), np.ones(2 * pad + 1), mode="same") > 0
+    in_contact = _widened(distance < touch, pad)
     return Strikes(surface=surface, effect=effect, normal=normal, times=peaks, pressed_s=float(against.sum() * dt),
                    closest=closest, touch_distance=touch, in_contact=in_contact, give=give)

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from discovery.flight_log import FlightLog, NominalVehicle
+from discovery.regressors import rotor_centres_world
 from discovery.surface_contact import (
     CONTACT_MARGIN,
     RUB_MIN,
@@ -399,7 +400,7 @@ def test_a_vehicle_held_back_as_it_slides_along_the_wall_touches_it_and_one_at_t
     friction)."""
     log, at_wall = _slide_along_wall(held_back=0.6)
     normal = np.array([1.0, 0.0, 0.0])
-    rotors = log.p_world[:, None, :] + np.einsum("nij,rj->nri", log.R_body_to_world, log.vehicle.rotor_positions_array)
+    rotors = rotor_centres_world(log.p_world, log.R_body_to_world, log.vehicle.rotor_positions_array)
     distance = log.scene.walls[0].distance(rotors).min(axis=1)
     assert distance.min() == pytest.approx(STOP, abs=1e-3)
     (touched,) = surface_strikes(log)
