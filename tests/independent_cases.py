@@ -333,6 +333,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--wall-end", choices=sorted(WALL_ENDS), default="top",
                         help="where the finite wall ends: at its top (default) or at its side")
     parser.add_argument("--noise", type=float, default=1.0, help="measurement noise times this (default 1)")
+    parser.add_argument("--yaw-swing", default="0,0",
+                        help="the heading swings by this amplitude (deg) with this period (s) instead of holding 0")
     args = parser.parse_args(argv)
     if not 0.25 < args.gain_floor < 5.0:  # at a quarter of the radius the image-rotor gain is infinite
         parser.error(f"--gain-floor must be in (0.25, 5) radii, got {args.gain_floor}")
@@ -351,6 +353,11 @@ def main(argv: list[str] | None = None) -> int:
     shift = tuple(float(x) for x in args.shift.split(","))
     if len(shift) != 2:
         parser.error(f"--shift must be two numbers x,y, got {args.shift!r}")
+    swing = tuple(float(x) for x in args.yaw_swing.split(","))
+    if len(swing) != 2 or not 0.0 <= swing[0] <= 90.0 or (swing[0] and not 1.0 <= swing[1] <= 600.0):
+        parser.error(f"--yaw-swing must be amplitude,period with amplitude in [0, 90] deg and period in [1, 600] s, "
+                     f"got {args.yaw_swing!r}")
+    independent_sim.YAW_SWING = (math.radians(swing[0]), swing[1])
     global WEIGHT, WALL_END
     WALL_END = WALL_ENDS[args.wall_end]
     independent_sim.WORLD_TURN, independent_sim.WORLD_SHIFT = math.radians(args.turn), shift

@@ -44,8 +44,13 @@ ROTORS_BODY = rotor_layout(ROTOR_RADIUS)
 
 
 def reach_toward_wall() -> float:
-    """m: how far the rotor centres reach toward the wall at x = 0 (along -x) at yaw 0."""
-    return -float(ROTORS_BODY[:, 0].min())
+    """m: how far the rotor centres reach toward the wall at x = 0 (along -x), at the heading of the
+    :data:`YAW_SWING` that brings them farthest (at yaw 0 when the heading is held)."""
+    amplitude = YAW_SWING[0]
+    headings = np.linspace(-amplitude, amplitude, 181) if amplitude else np.zeros(1)
+    x_body, y_body = ROTORS_BODY[:, 0], ROTORS_BODY[:, 1]
+    x_world = np.cos(headings)[:, None] * x_body - np.sin(headings)[:, None] * y_body
+    return -float(x_world.min())
 
 
 _DT = 0.002  # s, integration step
@@ -79,6 +84,9 @@ ACCELEROMETER = False
 #: position-loop gains that beat wall suction's pull (its negative stiffness, 2 k_s for two near rotors, reaches
 #: 14 N/m at k_s = 7 N/m; the default loop's 1.3 kg x 6 /s^2 = 7.8 N/m let the vehicle through the wall, which this
 #: simulator does not stop)
+#: the heading's swing (amplitude rad, period s): the vehicle yaws ``A sin(2 pi t / P)`` about the wall's normal
+#: instead of holding yaw 0 (A = 0, the default)
+YAW_SWING: tuple[float, float] = (0.0, 0.0)
 NEAR_WALL = {"kp": [20.0, 6.0, 12.0], "kd": [8.0, 4.0, 6.0], "ki": [2.0, 1.0, 4.0]}
 
 
@@ -111,6 +119,15 @@ def _image_gain(radius: float, distance: float, offset: float) -> float:
     at :data:`GAIN_FLOOR_RADII` radii."""
     d = max(distance + offset, GAIN_FLOOR_RADII * radius)
     return 1.0 / (1.0 - (radius / (4.0 * d)) ** 2)
+
+
+def _yaw_reference(t: float) -> tuple[float, float]:
+    """The heading (rad) and its rate (rad/s) the loop tracks at ``t``: :data:`YAW_SWING`."""
+    amplitude, period = YAW_SWING
+    if not amplitude:
+        return 0.0, 0.0
+    omega = 2 * math.pi / period
+    return amplitude * math.sin(omega * t), amplitude * omega * math.cos(omega * t)
 
 
 def _on_wall(effects: dict, at: np.ndarray) -> bool:
@@ -307,7 +324,9 @@ def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: floa
                 f_des = MASS * (a_ref + kp * (p_ref - p) + kd * (v_ref - v) + ki * integral + np.array([0, 0, GRAVITY]))
                 thrust = float(max(0.0, f_des @ R[:, 2]))
                 w_cmd = 8.0 * (R.T @ np.cross(R[:, 2], f_des / np.linalg.norm(f_des)))
-                w_cmd[2] = -2.0 * math.atan2(R[1, 0], R[0, 0])  # yaw held at 0
+                yaw_ref, yaw_rate_ref = _yaw_reference(t)  # yaw held at 0 unless it swings
+                yaw_error = math.remainder(math.atan2(R[1, 0], R[0, 0]) - yaw_ref, 2 * math.pi)
+                w_cmd[2] = yaw_rate_ref - 2.0 * yaw_error
                 if takeoff and t > end_survey + 0.5 * DESCEND_S and p[2] < REST_HEIGHT + 0.003 and abs(v[2]) < 0.05:
                     landed_at, landed_thrust = t, min(thrust, 0.9 * MASS * GRAVITY)
         inputs = (effects, thrust, w_cmd, rng.normal(0.0, force_noise, 3), motor_lag, t, takeoff)

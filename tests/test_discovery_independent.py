@@ -549,3 +549,29 @@ def test_a_hover_whose_thrust_varies_by_two_percent_still_determines_a_thrust_ma
     assert found.names_ == ["thrust_scale"]
     values = found.effects_[0].values
     assert values["scale"][0] == pytest.approx(0.91, rel=0.05) and values["offset"][0] == pytest.approx(-1.2, rel=0.1)
+
+
+def test_a_vehicle_yawing_beside_the_wall_with_rotors_on_its_axes_gives_suction_and_body_drag(tmp_path, monkeypatch):
+    """The heading swings 60 degrees either way (the other logs hold it at 0), so the rotor nearest the wall changes
+    and the body's drag axes turn against the world's: per-rotor suction and body-frame drag must both be followed."""
+    import tests.independent_sim as sim
+
+    monkeypatch.setattr(sim, "ROTORS_BODY", sim.rotor_layout(0.125, plus=True))
+    monkeypatch.setattr(sim, "YAW_SWING", (np.radians(60.0), 23.0))
+    truth = {"suction": (5.5, 0.125), "linear_drag": [0.15, 0.4, 0.3]}
+    # the rotor nearest the wall comes as near it as on the other wall logs: 9 cm short of the centre at 45 degrees
+    centre = (0.25 + sim.reach_toward_wall() - 0.125 / np.sqrt(2.0), 0.0, 1.0)
+    rows = fly(truth, centre=centre, amplitude=(0.09, 0.5, 0.25), period=(7.0, 9.0, 3.0), duration=60.0,
+               rate_hz=100.0, seed=21, gains=NEAR_WALL)
+    yaw = [np.degrees(np.arctan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2)))
+           for _, _, _, q, *_ in rows]
+    assert min(yaw) < -55.0 and max(yaw) > 55.0
+    found = _discover(write(rows, tmp_path / "yawing.csv", seed=21))
+    assert sorted(found.names_) == ["linear_drag", "wall_suction"]
+    fitted = {f.name: f.values for f in found.effects_}
+    assert max(relative_errors(fitted["wall_suction"], {"k_s": 5.5, "d_thr": 0.125})) < 0.05
+    # the body's x axis sees the wall's slow in-and-out and, turned, some of the sweep along it: D[0] is known to
+    # +-0.01 N s/m (at a held heading, +-0.02), so each entry is checked against its own standard error
+    drag_std = next(std for f, std in zip(found.effects_, found.param_std_) if f.name == "linear_drag")["D"]
+    assert np.all(np.abs(fitted["linear_drag"]["D"] - truth["linear_drag"]) < 3.0 * np.asarray(drag_std))
+    assert max(relative_errors(fitted["linear_drag"], {"D": truth["linear_drag"]})[1:]) < 0.05
