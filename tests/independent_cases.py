@@ -61,6 +61,8 @@ WEIGHT = MASS * GRAVITY
 #: parameters in the world's frame: turned back from the log's frame to be judged (the drags' coefficients are in
 #: body axes)
 WORLD_FRAME_PARAMETERS = {("constant_force", "F"), ("quadratic_drag", "w")}
+#: draw each case's parameters from the wide ranges (``--wide``)
+WIDE = False
 UNEXPLAINED_SHARE = 0.03  # of the weight: a log leaving more must say so, with where it lives
 
 
@@ -84,7 +86,10 @@ class Case:
 
 
 def cases(seed: int) -> list[Case]:
-    """Every class, with parameters drawn from ``seed`` (in the second simulator's and the library's terms)."""
+    """Every class, with parameters drawn from ``seed`` (in the second simulator's and the library's terms); with
+    :data:`WIDE`, from ranges two to four times as wide (and a motor lag drawn too)."""
+    if WIDE:
+        return _cases_wide(seed)
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x1D]))
     u = lambda low, high: float(rng.uniform(low, high))  # noqa: E731
     k_s, d_thr = u(4.5, 7.0), u(0.115, 0.14)
@@ -94,6 +99,27 @@ def cases(seed: int) -> list[Case]:
     radius, ceiling_radius = u(0.07, 0.09), u(0.07, 0.09)
     scale, offset = u(0.88, 0.93), u(-1.6, -0.9)
     gust_f = u(0.2, 0.3)
+    return _cases(rng, k_s, d_thr, wind, D, C, w_air, radius, ceiling_radius, scale, offset, gust_f, 0.03)
+
+
+def _cases_wide(seed: int) -> list[Case]:
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x1D, 0x3E]))
+    u = lambda low, high: float(rng.uniform(low, high))  # noqa: E731
+    sign = lambda: float(rng.choice([-1.0, 1.0]))  # noqa: E731
+    k_s, d_thr = u(2.5, 10.0), u(0.09, 0.19)
+    wind = [u(0.1, 0.8) * sign(), u(0.1, 0.8) * sign(), u(0.1, 0.5) * sign()]
+    D = [u(0.06, 0.5), u(0.06, 0.5), u(0.1, 0.7)]
+    C, w_air = [u(0.04, 0.22), u(0.04, 0.22), u(0.03, 0.15)], [u(0.5, 3.0) * sign(), u(0.5, 3.0) * sign(), 0.0]
+    radius, ceiling_radius = u(0.05, 0.11), u(0.05, 0.11)
+    scale, offset = u(0.8, 1.15), u(-2.0, 1.5)
+    gust_f = u(0.1, 0.6)
+    return _cases(rng, k_s, d_thr, wind, D, C, w_air, radius, ceiling_radius, scale, offset, gust_f, u(0.015, 0.06))
+
+
+def _cases(rng: np.random.Generator, k_s: float, d_thr: float, wind: list[float], D: list[float], C: list[float],
+           w_air: list[float], radius: float, ceiling_radius: float, scale: float, offset: float, gust_f: float,
+           lag: float) -> list[Case]:
+    u = lambda low, high: float(rng.uniform(low, high))  # noqa: E731
     out = [
         Case("clean", {}, OPEN),
         Case("suction", {"suction": (k_s, d_thr)}, WALL, {"wall_suction": {"k_s": k_s, "d_thr": d_thr}}),
@@ -107,7 +133,7 @@ def cases(seed: int) -> list[Case]:
         Case("thrust_scale", {"thrust_scale": scale}, OPEN, {"thrust_scale": {"scale": scale}}, {"wall": False}),
         Case("quadratic_drag_wind", {"quadratic_drag": (C, w_air)}, FAST, {"quadratic_drag": {"C": C, "w": w_air}},
              {"wall": False}),
-        Case("motor_lag", {"linear_drag": D}, OPEN, {"linear_drag": {"D": D}}, {"wall": False}, motor_lag=0.03),
+        Case("motor_lag", {"linear_drag": D}, OPEN, {"linear_drag": {"D": D}}, {"wall": False}, motor_lag=lag),
         # ---- beyond the library, and a sidecar that is wrong
         Case("reversed_normal", {"suction": (k_s, d_thr)}, WALL, {"wall_suction": {"k_s": k_s, "d_thr": d_thr}},
              {"wall_normal": -1.0}, says=("flip the sign of scene.walls[0].normal",)),
@@ -333,6 +359,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--wall-end", choices=sorted(WALL_ENDS), default="top",
                         help="where the finite wall ends: at its top (default) or at its side")
     parser.add_argument("--noise", type=float, default=1.0, help="measurement noise times this (default 1)")
+    parser.add_argument("--wide", action="store_true",
+                        help="draw the parameters from ranges two to four times as wide (a thrust scale above 1, a "
+                             "positive offset, weak and strong suction, winds of either sign, a motor lag of 15-60 ms)")
     parser.add_argument("--yaw-swing", default="0,0",
                         help="the heading swings by this amplitude (deg) with this period (s) instead of holding 0")
     args = parser.parse_args(argv)
@@ -358,7 +387,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--yaw-swing must be amplitude,period with amplitude in [0, 90] deg and period in [1, 600] s, "
                      f"got {args.yaw_swing!r}")
     independent_sim.YAW_SWING = (math.radians(swing[0]), swing[1])
-    global WEIGHT, WALL_END
+    global WEIGHT, WALL_END, WIDE
+    WIDE = args.wide
     WALL_END = WALL_ENDS[args.wall_end]
     independent_sim.WORLD_TURN, independent_sim.WORLD_SHIFT = math.radians(args.turn), shift
     independent_sim.NOISE_SCALE, independent_sim.ACCELEROMETER = args.noise, args.accelerometer
