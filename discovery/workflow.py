@@ -89,6 +89,7 @@ from discovery.selection import (
     sequential_explained,
 )
 from discovery.standins import OWN_QUANTITIES, depends_on, own_quantity, structures_for, test_effect
+from discovery.suction_bound import suction_bound
 from discovery.thrust_map import ThrustMap, written_effects
 from discovery.unexplained import is_unexplained, where_it_lives
 from discovery.wall_extent import BoundedWall, find_edge, plain_wall, side_gains
@@ -305,6 +306,7 @@ class Discovery:
                               if c["effect"] in written or c["action"].startswith("effect left out")]
         self.notes_ += self.written_notes_
         self._wind_limit(data, final)
+        self._suction_bound(selection, excluded)
         # the proof against the user's nominal model
         self._say("open-loop predictions")
         vehicle = data.vehicle.to_vehicle_params()
@@ -813,6 +815,16 @@ class Discovery:
         templates = [t for t in self._templates if t.name not in excluded]
         return r_nom, forward_selection(data, r_nom, templates, self.max_effects, progress=self._say,
                                         look_for_lag=look_for_lag)
+
+    def _suction_bound(self, selection: Selection, excluded: set[str]) -> None:
+        """Near a wall with no wall suction kept: the limit saying how strong a suction the flight could miss."""
+        closest = nearest_wall(self.regressors_)
+        if (selection.fitter is None or self.final_ is None or closest is None or not closest <= NEAR_SURFACE
+                or "wall_suction" in excluded or any(e.name == "wall_suction" for e in self.final_.fit.effects)):
+            return
+        limit = suction_bound(selection.fitter, self.final_, closest, self._hold)
+        if limit is not None:
+            self.limits_.append(limit)
 
     def _lag_limits(self, lag: dict | None) -> None:
         if lag is not None and not lag["kept"] and lag["reason"].startswith(UNDETERMINED_LAG):

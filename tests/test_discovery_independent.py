@@ -575,3 +575,29 @@ def test_a_vehicle_yawing_beside_the_wall_with_rotors_on_its_axes_gives_suction_
     drag_std = next(std for f, std in zip(found.effects_, found.param_std_) if f.name == "linear_drag")["D"]
     assert np.all(np.abs(fitted["linear_drag"]["D"] - truth["linear_drag"]) < 3.0 * np.asarray(drag_std))
     assert max(relative_errors(fitted["linear_drag"], {"D": truth["linear_drag"]})[1:]) < 0.05
+
+
+def test_a_wall_suction_too_weak_to_find_is_bounded_by_the_pull_the_flight_could_hide(tmp_path, monkeypatch):
+    """Measurement noise four times the usual. Flown without suction, the report bounds what could hide by 0.02 N
+    of pull on a rotor at its closest approach; a suction pulling 0.036 N there (k_s 1 N/m, d_thr 0.1 m) is not
+    found either, and its bound holds that pull."""
+    import tests.independent_sim as sim
+
+    monkeypatch.setattr(sim, "NOISE_SCALE", 4.0)
+
+    def flown(truth: dict, seed: int) -> tuple[Discovery, float]:
+        rows = fly(truth, centre=(0.25, 0.0, 1.0), amplitude=(0.09, 0.5, 0.25), period=(7.0, 9.0, 3.0),
+                   duration=60.0, rate_hz=100.0, seed=seed, gains=NEAR_WALL)
+        closest = min(min((np.asarray(p) + sim._R(np.asarray(q)) @ r)[0] for r in sim.ROTORS_BODY)
+                      for _, p, _, q, *_ in rows)
+        return _discover(write(rows, tmp_path / f"wall_{seed}.csv", seed=seed)), closest
+
+    def bound(found: Discovery) -> float:
+        (limit,) = [x for x in found.limits_ if x["effects"] == ["wall_suction"] and "bound_N" in x]
+        return limit["bound_N"]
+
+    clean, _ = flown({}, 31)
+    assert clean.names_ == [] and 0.0 < bound(clean) < 0.02
+    weak, closest = flown({"suction": (1.0, 0.1)}, 33)
+    pull = 1.0 * (0.1 - closest)
+    assert weak.names_ == [] and 0.03 < pull < bound(weak) < 2 * pull
