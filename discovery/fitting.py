@@ -184,6 +184,15 @@ class EffectFit:
             out.append(jac)
         return out
 
+    def informed(self, theta: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
+        """Mask of the packed entries that move the residual at the fit rows selected by ``masks`` (per segment):
+        a column of the Jacobian there that is not zero. An entry no selected row depends on (a wall's suction on
+        flights without a wall) is not determined by those rows at all."""
+        informed = np.zeros(self.size, dtype=bool)
+        for jac, mask in zip(self._jacobians(theta), masks):
+            informed |= np.any(jac[mask] != 0.0, axis=(0, 1))
+        return informed
+
     def _stacked(self, theta: np.ndarray, masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         residual = self.residuals(theta)
         jacobians = self._jacobians(theta)

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from discovery.determination import entry, null_value
 from discovery.fitting import Candidate, EffectFit
 from discovery.layout import CONDITIONS
 from discovery.residuals import FlightData
@@ -67,10 +68,15 @@ def held_out_flights(data: FlightData, final: Candidate, sources: list[str]) -> 
     """Each flight predicted by the model fitted on the others: the shared parameters from the other flights,
     the held-out flight's own conditions fitted on it alone. Its force error (rms at the fit rows) against the
     full fit's error on it: ``[{"log", "force_rms_N", "in_sample_force_rms_N", "ratio_to_in_sample",
-    "conditions_fitted_on_it"}]``."""
+    "conditions_fitted_on_it", "on_no_other_flight"}]``.
+
+    An effect that acts on no other flight (a wall's suction when only this flight came near a wall) is not
+    determined by them: the flight is predicted without it, and ``on_no_other_flight`` names it. Its fitted values
+    hold what this flight showed, so keeping them would not be a prediction."""
     problem, fit = final.problem, final.fit
     if problem is None or not final.names or fit.layout is None:
         return []
+    layout = fit.layout
     held = fit.held if fit.held is not None else np.zeros(problem.size, dtype=bool)
     inside = problem.residuals(fit.theta)
     out = []
@@ -79,15 +85,28 @@ def held_out_flights(data: FlightData, final: Candidate, sources: list[str]) -> 
         mine = [~m for m in others]
         if not any(m.any() for m in others):
             continue
-        shared = problem.fit(masks=others, theta0=fit.theta, held=held).theta
-        own = fit.layout.flight_entries(f) & ~held
+        informed = problem.informed(fit.theta, [m & u for m, u in zip(others, problem.usable)])
+        start, held_here, absent = fit.theta.copy(), held.copy(), []
+        for e, effect in enumerate(fit.effects):
+            entries = layout.entries_of(e)
+            if informed[entries & ~layout.flight_entries(f)].any():
+                continue
+            absent.append(effect.name)
+            main = effect.parameters[0]  # no force at its null value (no suction, no drag, no gain)
+            null = null_value(effect.name, main.name)
+            for rows in layout.index[e]:
+                start[rows[entry(effect, main.name, None):entry(effect, main.name, None) + main.size]] = \
+                    0.0 if null is None else null
+            held_here |= entries
+        shared = problem.fit(masks=others, theta0=start, held=held_here).theta
+        own = layout.flight_entries(f) & ~held_here
         theta = problem.fit(masks=mine, theta0=shared, held=~own).theta if own.any() else shared
         predicted = problem.residuals(theta)
         held_out = _rms(np.concatenate([r[m] for r, m in zip(predicted, mine)]))
         in_sample = _rms(np.concatenate([r[m] for r, m in zip(inside, mine)]))
         out.append({"log": sources[f], "force_rms_N": held_out, "in_sample_force_rms_N": in_sample,
                     "ratio_to_in_sample": held_out / in_sample if in_sample > 0 else None,
-                    "conditions_fitted_on_it": int(own.sum())})
+                    "conditions_fitted_on_it": int(own.sum()), "on_no_other_flight": absent})
     return out
 
 

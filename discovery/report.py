@@ -300,8 +300,10 @@ def format_summary(report: dict[str, Any]) -> str:
         lines.append(f"held-out flight {record['log']}: force error {record['force_rms_N']:.4f} N rms with the model "
                      f"fitted on the other flights ({_fmt(record.get('ratio_to_in_sample'))} times its in-sample "
                      f"{record['in_sample_force_rms_N']:.4f} N"
-                     + (f"; its own {record['conditions_fitted_on_it']} condition entries fitted on it)"
-                        if record.get("conditions_fitted_on_it") else ")"))
+                     + (f"; its own {record['conditions_fitted_on_it']} condition entries fitted on it"
+                        if record.get("conditions_fitted_on_it") else "")
+                     + (f"; {', '.join(record['on_no_other_flight'])} acts on no other flight: predicted without "
+                        "it" if record.get("on_no_other_flight") else "") + ")")
     for case in report.get("undetermined") or []:
         lines.append(f"undetermined {case['effect']}.{case['parameter']} = {_fmt(case['value'])} +- "
                      f"{_fmt(case['std'])}: {case['reason']}; {case['action']}; to determine: {case['manoeuvre']}")
