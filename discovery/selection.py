@@ -594,20 +594,25 @@ def _subsets(items: list[str], size: int) -> list[tuple[str, ...]]:
 
 
 def _extra_determined(candidate: Candidate, key: str) -> bool:
-    """A fuller form counts only if some entry of its extra parameters is determined (else the plain form
-    says as much); undetermined entries (a wind's vertical component, say) are nulled later."""
+    """A fuller form counts only if some entry of its extra parameters is determined on some flight (else the
+    plain form says as much); undetermined entries (a wind's vertical component, a flight in near-still air) are
+    nulled later."""
     if "[" not in key:
         return True
     from discovery.determination import undetermined_cases
 
     index = candidate.names.index(key)
-    effect = candidate.fit.effects[index]
-    std = candidate.fit.std_dicts()[index]
-    extra = _extra_parameters(effect)
+    extra = _extra_parameters(candidate.fit.effects[index])
     if not extra:
         return True  # an option without parameters of its own (priced as one by the score)
-    cases = undetermined_cases([effect], [std])
-    return sum(1 for c in cases if c["name"] in {p.name for p in extra}) < sum(p.size for p in extra)
+    layout = candidate.fit.layout
+    for flight in range(layout.n_flights if layout is not None else 1):
+        effect = layout.effects(candidate.fit.theta, flight)[index] if layout is not None \
+            else candidate.fit.effects[index]
+        cases = undetermined_cases([effect], [candidate.fit.std_dicts(flight)[index]])
+        if sum(1 for c in cases if c["name"] in {p.name for p in extra}) < sum(p.size for p in extra):
+            return True
+    return False
 
 
 def _backward(fitter: Fitter, current: Candidate, material) -> tuple[Candidate, list[str]]:

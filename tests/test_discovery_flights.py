@@ -94,6 +94,20 @@ def test_a_flight_whose_wall_no_other_flight_has_is_held_out_without_its_suction
     assert "wall_suction acts on no other flight: predicted without it" in out
 
 
+def test_flights_whose_first_is_in_still_air_still_get_their_winds(tmp_path):
+    """The first flight is flown in still air, so its own wind is undetermined (zero within its interval); the
+    others' winds are determined, and the drag in wind is chosen for all three. Before, only the first flight's wind
+    was asked, and a linear drag with a steady force was written instead."""
+    still = write(fly({"quadratic_drag": (C, [0.0, 0.0, 0.0])}, duration=40.0, rate_hz=100.0, seed=331, **FAST),
+                  tmp_path / "still.csv", seed=331, wall=False)
+    paths = [still, _wind_flight(tmp_path, 1, 332), _wind_flight(tmp_path, 2, 333)]
+    found = Discovery().fit([read_log(p) for p in paths])
+    assert found.names_ == ["quadratic_drag"]
+    assert found.effects_[0].values["C"] == pytest.approx(C, rel=0.1)
+    for flight, wind in zip(found.flights_["conditions"][1:], WINDS[1:3]):
+        assert np.linalg.norm(np.asarray(flight["quadratic_drag"]["w"]) - wind) < 0.1 * np.linalg.norm(wind)
+
+
 def test_candidates_are_effect_objects_and_predict_needs_a_fit(tmp_path):
     discovery = Discovery(candidates=[make_effect("wall_suction", thrust_scaling=True), "linear_drag"])
     assert discovery.candidates == ["wall_suction", "linear_drag"]
