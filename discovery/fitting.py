@@ -234,14 +234,7 @@ class EffectFit:
 
     def starts(self, previous: dict[str, np.ndarray] | None = None,
                base: np.ndarray | None = None) -> list[np.ndarray]:
-        """Starting points: previous values (by key) where known, else the effect's default or :data:`STARTS`.
-
-        With several flights, when a term has :data:`STARTS` and any term has a previous value, the fresh starts
-        (every term from its default or :data:`STARTS`) are tried too: a previous value fitted in another set may
-        have taken another term's force (a suction reaching 0.3 m out stood in for one flight's own wind before
-        the drag and its winds came in, and held the joint fit at 12 times the cost of the right one). A single
-        flight has no per-flight conditions to trade with; over 500 logs of the second simulator its fits were
-        right without them, at two thirds of the time."""
+        """Starting points: previous values (by key) where known, else the effect's default or :data:`STARTS`."""
         per_term: list[list[np.ndarray]] = []
         for key, term, template in zip(self.layout.keys, self.terms, self.templates):
             if previous and key in previous:
@@ -259,22 +252,21 @@ class EffectFit:
         for i in range(n):
             vectors = {key: o[min(i, len(o) - 1)] for key, o in zip(self.layout.keys, per_term)}
             out.append(self.layout.pack(vectors, base))
-        several = any(not term.affine and template.name in STARTS for term, template in zip(self.terms, self.templates))
-        if several and self.data.n_flights > 1 and previous and any(key in previous for key in self.layout.keys):
-            out += self.starts(None, base)
         return out
 
     def fit(self, masks: list[np.ndarray] | None = None, previous: dict[str, np.ndarray] | None = None,
-            theta0: np.ndarray | None = None, held: np.ndarray | None = None) -> FitResult:
-        """Fit on the fit rows selected by ``masks`` (all if None), from several starts; the entries ``held``
-        (a mask over the packed vector) keep their value in ``theta0`` or the start."""
+            theta0: np.ndarray | None = None, held: np.ndarray | None = None,
+            restart: dict[str, np.ndarray] | None = None) -> FitResult:
+        """Fit on the fit rows selected by ``masks`` (all if None), from several starts (those of ``previous``,
+        and of ``restart`` too when given); the entries ``held`` (a mask over the packed vector) keep their value
+        in ``theta0`` or the start."""
         masks = [m & u for m, u in zip(masks, self.usable)] if masks else self.usable
         if not self.terms:  # nothing to fit: the nominal model
             rows = np.concatenate([r[m].reshape(-1) for r, m in zip(self.r_nom, masks)])
             return FitResult([], np.zeros(0), np.zeros(0), 0.5 * float(rows @ rows), rows.size, True, "no parameters",
                              layout=self.layout, held=np.zeros(0, dtype=bool))
         held = np.zeros(self.size, dtype=bool) if held is None else np.asarray(held, dtype=bool)
-        starts = [theta0] if theta0 is not None else self.starts(previous)
+        starts = [theta0] if theta0 is not None else self.starts(previous) + (self.starts(restart) if restart else [])
         best = None
         for x0 in starts:
             result = self._solve(np.asarray(x0, dtype=float), masks, free=~held)
@@ -450,8 +442,10 @@ class Fitter:
 
     def candidate(self, keys: list[str], previous: dict[str, np.ndarray] | None = None,
                   hold: dict[str, dict[int, float]] | None = None,
-                  exclude: list[np.ndarray] | None = None) -> Candidate:
-        """Fit, cross-validate and score the set ``keys``; ``previous`` holds starting values by key,
+                  exclude: list[np.ndarray] | None = None,
+                  restart: dict[str, np.ndarray] | None = None) -> Candidate:
+        """Fit, cross-validate and score the set ``keys``; ``previous`` holds starting values by key (``restart``,
+        other starting values to try too, the first time the set is fitted),
         ``hold`` entries of effects' own vectors to keep at a value (``{key: {entry: value}}``) and ``exclude``
         (per segment, over its fit rows) rows the fits leave out (see :class:`EffectFit`)."""
         hold = {k: v for k, v in (hold or {}).items() if v and k in keys}
@@ -470,7 +464,7 @@ class Fitter:
                         for rows in problem.layout.index[e]:
                             held_mask[rows[entry]] = True
                             theta0[rows[entry]] = value
-            fit = problem.fit(previous=start, theta0=theta0, held=held_mask)
+            fit = problem.fit(previous=start, theta0=theta0, held=held_mask, restart=restart)
             cv, _ = problem.cross_validate(fit)
             axes = np.mean(np.concatenate(cv) ** 2, axis=0) if cv else np.zeros(3)
             score = self.scorer(axes, problem.layout, fit.held if fit.held is not None else held_mask)

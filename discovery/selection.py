@@ -60,7 +60,7 @@ import numpy as np
 from scipy.special import chdtri
 
 from discovery.coverage import NEAR_SURFACE, THRUST_VARIATION, thrust_variation
-from discovery.fitting import Candidate, Fitter, applicable
+from discovery.fitting import STARTS, Candidate, Fitter, applicable
 from discovery.layout import ParameterLayout
 from discovery.motor_lag import LAG_KEY, UNDETERMINED_LAG, LagTerm, MotorLag
 from discovery.noise import noise_floor
@@ -581,7 +581,14 @@ def _drag_in_wind(fitter: Fitter, current: Candidate, template: Effect, progress
             previous = {k: v for k, v in current.previous().items() if k in names}
             if "quadratic_drag" in dropped:
                 previous[key] = np.concatenate([current.previous()["quadratic_drag"], np.zeros(3)])
-            cand = fitter.candidate(names, previous=previous)
+            # a term with several starts (a wall suction) is also started from its default: beside what the wind
+            # replaces it may have stood in for that wind (a suction reaching 0.3 m out, one flight's own wind
+            # pushing as it does), a false minimum the joint fit would stay in
+            restart = {k: fitter.templates[k].param_vector() if fitter.templates[k].name in STARTS else v
+                       for k, v in previous.items()}
+            cand = fitter.candidate(names, previous=previous,
+                                    restart=restart if any(fitter.templates[k].name in STARTS for k in previous)
+                                    else None)
             if cand.score < best.score and _extra_determined(cand, key):
                 best = cand
     return best
