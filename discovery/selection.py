@@ -237,10 +237,11 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
         explained = worse.mse - better.mse
         return worse.mse > 0 and explained / worse.mse >= MIN_SHARE and explained >= floor
 
-    def grow(current: Candidate) -> Candidate:
-        """Forward steps from ``current``: the effect whose addition scores best, while one pays."""
+    def grow(current: Candidate, skip: tuple[str, ...] = ()) -> Candidate:
+        """Forward steps from ``current``: the effect whose addition scores best, while one pays (effects named
+        in ``skip`` are not asked)."""
         while len(current.names) < max_effects:
-            taken = {effect_name(k) for k in current.names}
+            taken = {effect_name(k) for k in current.names} | set(skip)
             remaining = [k for k in templates if effect_name(k) not in taken]
             if not remaining:
                 break
@@ -293,8 +294,9 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
             removed += dropped
             # and another effect may now pay: several flights' own winds took what a steady force and a linear
             # drag could not, and a wall suction they had crowded out (k_s 5.15 N/m, scoring -6150 against -3688
-            # beside the drag in wind) is then found
-            grown = grow(current)
+            # beside the drag in wind) is then found. What the wind may replace is not asked again: the drag in
+            # wind was tried beside each subset of it
+            grown = grow(current, skip=WIND_REPLACES)
             if grown is not current:
                 current, dropped = _backward(fitter, grown, material)
                 removed += dropped
