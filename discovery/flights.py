@@ -93,10 +93,9 @@ def held_out_flights(data: FlightData, final: Candidate, sources: list[str]) -> 
                 continue
             absent.append(effect.name)
             main = effect.parameters[0]  # no force at its null value (no suction, no drag, no gain)
-            null = null_value(effect.name, main.name)
+            null, first = null_value(effect.name, main.name), entry(effect, main.name, None)
             for rows in layout.index[e]:
-                start[rows[entry(effect, main.name, None):entry(effect, main.name, None) + main.size]] = \
-                    0.0 if null is None else null
+                start[rows[first:first + main.size]] = 0.0 if null is None else null
             held_here |= entries
         shared = problem.fit(masks=others, theta0=start, held=held_here).theta
         own = layout.flight_entries(f) & ~held_here

@@ -5,8 +5,9 @@ noise. :func:`suction_bound` says how much could hide there: for each threshold 
 ``d_thr`` of :data:`THRESHOLDS_M` that reaches :data:`INSIDE_M` past the rotors' closest approach, ``k_s`` is
 fitted (beside the effects kept) with ``d_thr`` held, and its 95 % upper bound turned into the
 pull on one rotor at that closest approach, ``(k_s + 1.96 sigma) (d_thr - d_min)``. The largest
-over the thresholds is the bound: a suction pulling a rotor less than that at the closest
-approach cannot be told from none on this flight, whatever its threshold.
+over the thresholds is the bound: a suction with its threshold in that range that pulls a rotor
+less than that at the closest approach cannot be told from none on this flight. One acting only
+nearer the wall than the rotors came has no force on the flight at all.
 """
 
 from __future__ import annotations
@@ -40,10 +41,10 @@ def suction_bound(fitter: Fitter, final: Candidate, closest_m: float, hold: dict
         return None
     keys = [k for k in final.names if fitter.templates[k].name != template.name] + [key]
     position = entry(template, "d_thr", None)
+    problem = fitter.problem(keys)
+    e = problem.layout.keys.index(key)
     bounds = []
     for d_thr in (d for d in THRESHOLDS_M if d >= closest_m + INSIDE_M):
-        problem = fitter.problem(keys)
-        e = problem.layout.keys.index(key)
         theta0 = problem.starts({k: v for k, v in final.previous().items() if k in keys})[0]
         held = np.zeros(problem.size, dtype=bool)
         for other, (other_key, per_flight) in enumerate(zip(problem.layout.keys, problem.layout.index)):
