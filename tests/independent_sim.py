@@ -81,12 +81,12 @@ SECOND_WALL_X: float | None = None
 NOISE_SCALE = 1.0
 #: the log also has the world-frame acceleration (``ax, ay, az``) as an accelerometer feels it at each row's instant
 ACCELEROMETER = False
-#: position-loop gains that beat wall suction's pull (its negative stiffness, 2 k_s for two near rotors, reaches
-#: 14 N/m at k_s = 7 N/m; the default loop's 1.3 kg x 6 /s^2 = 7.8 N/m let the vehicle through the wall, which this
-#: simulator does not stop)
 #: the heading's swing (amplitude rad, period s): the vehicle yaws ``A sin(2 pi t / P)`` about the wall's normal
 #: instead of holding yaw 0 (A = 0, the default)
 YAW_SWING: tuple[float, float] = (0.0, 0.0)
+#: position-loop gains that beat wall suction's pull (its negative stiffness, 2 k_s for two near rotors, reaches
+#: 14 N/m at k_s = 7 N/m; the default loop's 1.3 kg x 6 /s^2 = 7.8 N/m let the vehicle through the wall, which this
+#: simulator does not stop)
 NEAR_WALL = {"kp": [20.0, 6.0, 12.0], "kd": [8.0, 4.0, 6.0], "ki": [2.0, 1.0, 4.0]}
 
 
