@@ -457,13 +457,8 @@ class Fitter:
             held_mask = np.zeros(problem.size, dtype=bool)
             theta0 = None
             if hold:
-                starts = problem.starts(start)
-                theta0 = starts[0]
-                for e, key in enumerate(problem.layout.keys):
-                    for entry, value in hold.get(key, {}).items():
-                        for rows in problem.layout.index[e]:
-                            held_mask[rows[entry]] = True
-                            theta0[rows[entry]] = value
+                theta0 = problem.starts(start)[0]
+                held_mask = problem.layout.hold(theta0, hold)
             fit = problem.fit(previous=start, theta0=theta0, held=held_mask, restart=restart)
             cv, _ = problem.cross_validate(fit)
             axes = np.mean(np.concatenate(cv) ** 2, axis=0) if cv else np.zeros(3)

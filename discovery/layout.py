@@ -100,6 +100,16 @@ class ParameterLayout:
                     theta[rows] = value
         return theta
 
+    def hold(self, theta: np.ndarray, held: dict[str, dict[int, float]]) -> np.ndarray:
+        """Set the entries ``held`` (``{key: {entry of the effect's own vector: value}}``) in ``theta``, in place,
+        on every flight; returns the mask of those packed entries."""
+        mask = np.zeros(self.size, dtype=bool)
+        for e, key in enumerate(self.keys):
+            for entry, value in held.get(key, {}).items():
+                for rows in self.index[e]:
+                    mask[rows[entry]], theta[rows[entry]] = True, value
+        return mask
+
     def dicts(self, vector: np.ndarray, flight: int = 0) -> list[dict]:
         """Per effect, ``vector``'s entries (values or standard errors) as the effect's named parameters."""
         return [t.params_dict(v) for t, v in zip(self.templates, self.split(vector, flight))]

@@ -43,15 +43,11 @@ def suction_bound(fitter: Fitter, final: Candidate, closest_m: float, hold: dict
     position = entry(template, "d_thr", None)
     problem = fitter.problem(keys)
     e = problem.layout.keys.index(key)
+    start = problem.starts({k: v for k, v in final.previous().items() if k in keys})[0]
     bounds = []
     for d_thr in (d for d in THRESHOLDS_M if d >= closest_m + INSIDE_M):
-        theta0 = problem.starts({k: v for k, v in final.previous().items() if k in keys})[0]
-        held = np.zeros(problem.size, dtype=bool)
-        for other, (other_key, per_flight) in enumerate(zip(problem.layout.keys, problem.layout.index)):
-            fixed = {position: d_thr} if other == e else (hold or {}).get(other_key, {})
-            for own_entry, value in fixed.items():
-                for rows in per_flight:
-                    held[rows[own_entry]], theta0[rows[own_entry]] = True, value
+        theta0 = start.copy()
+        held = problem.layout.hold(theta0, {**(hold or {}), key: {position: d_thr}})
         fit = problem.fit(theta0=theta0, held=held)
         k_s, sigma = problem.layout.split(fit.theta, 0)[e][0], problem.layout.split(fit.param_std, 0)[e][0]
         if not (np.isfinite(sigma) and sigma > 0):
