@@ -255,7 +255,7 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
                     progress(f"trying {' + '.join(current.names + [key])}")
                 cand = fitter.candidate(current.names + [key], previous=current.previous())
                 gain = 1.0 - cand.mse / current.mse if current.mse > 0 else 0.0
-                usable = cand.score < current.score and material(cand, current) and _extra_determined(cand, key)
+                usable = cand.score < current.score and material(cand, current) and _form_determined(cand, key)
                 tried.append({"name": key, "cv_mse_N2": cand.mse, "gain": gain, "score": cand.score,
                               "material": material(cand, current), "params": cand.fit.effects[-1].params_dict()})
                 if cand.score < current.score:
@@ -526,7 +526,7 @@ def _refine_forms(fitter: Fitter, current: Candidate) -> tuple[Candidate, dict[s
                 names = [form if k == key else k for k in current.names]
                 previous = {k: v for k, v in current.previous().items() if k != key}
                 cand = fitter.candidate(names, previous=previous)
-                if cand.score < best.score and _extra_determined(cand, form):
+                if cand.score < best.score and _form_determined(cand, form):
                     best, swap = cand, (key, form)
         if best is current:
             return current, swaps
@@ -603,7 +603,7 @@ def _drag_in_wind(fitter: Fitter, current: Candidate, template: Effect, progress
             cand = fitter.candidate(names, previous=previous,
                                     restart=restart if any(fitter.templates[k].name in STARTS for k in previous)
                                     else None)
-            if cand.score < best.score and _extra_determined(cand, key):
+            if cand.score < best.score and _form_determined(cand, key):
                 best = cand
     return best
 
@@ -614,26 +614,31 @@ def _subsets(items: list[str], size: int) -> list[tuple[str, ...]]:
     return list(combinations(items, size))
 
 
-def _extra_determined(candidate: Candidate, key: str) -> bool:
-    """A fuller form counts only if some entry of its extra parameters is determined on some flight (else the
-    plain form says as much); undetermined entries (a wind's vertical component, a flight in near-still air) are
-    nulled later."""
+def _form_determined(candidate: Candidate, key: str) -> bool:
+    """A fuller form counts only if, on some flight, some entry of its extra parameters is determined (else the
+    plain form says as much) and, where its main parameter is a vector, some entry of that (else every entry is
+    nulled afterwards and nothing of it is written: a drag in wind whose coefficients are all undetermined, its wind
+    at a bound, is only ``C w^2`` standing in for a steady force, and leaving it out afterwards left no effect at
+    all). A single main parameter is not asked: an affine thrust map's scale may sit at 1 with its offset all of it.
+    Undetermined entries (a wind's vertical component, a flight in near-still air) are nulled later."""
     if "[" not in key:
         return True
     from discovery.determination import undetermined_cases
 
     index = candidate.names.index(key)
     extra = _extra_parameters(candidate.fit.effects[index])
-    if not extra:
-        return True  # an option without parameters of its own (priced as one by the score)
+    main = candidate.fit.effects[index].parameters[0]
     layout = candidate.fit.layout
+    extra_seen = not extra  # an option without parameters of its own (priced as one by the score)
+    main_seen = main.size == 1
     for flight in range(layout.n_flights if layout is not None else 1):
         effect = layout.effects(candidate.fit.theta, flight)[index] if layout is not None \
             else candidate.fit.effects[index]
         cases = undetermined_cases([effect], [candidate.fit.std_dicts(flight)[index]])
-        if sum(1 for c in cases if c["name"] in {p.name for p in extra}) < sum(p.size for p in extra):
-            return True
-    return False
+        extra_seen = extra_seen or \
+            sum(1 for c in cases if c["name"] in {p.name for p in extra}) < sum(p.size for p in extra)
+        main_seen = main_seen or sum(1 for c in cases if c["name"] == main.name) < main.size
+    return extra_seen and main_seen
 
 
 def _backward(fitter: Fitter, current: Candidate, material) -> tuple[Candidate, list[str]]:
