@@ -502,6 +502,29 @@ def test_a_ceiling_flown_nearer_than_its_form_is_trusted_is_fitted_beyond_that(t
     assert found.unexplained_["where"]["range"][0] < 0.6 * radius
 
 
+def test_a_thrust_scale_that_widens_the_ceilings_untrusted_range_goes_once_the_ceiling_is_fitted_alone(
+        tmp_path, monkeypatch):
+    """A 1.5 kg vehicle moves briskly 5-15 cm under a ceiling (radius 0.10 m, offset 1.2 cm) whose gain levels off at
+    0.6 radii. A thrust scale of 0.96 beside it let the radius reach 0.24 m and the offset 9.7 cm; from that radius
+    most of the flight lay nearer than the form is trusted, so the fit on all of it was kept and written (seed 7944
+    of the second simulator's wide draws, flown between waypoints). The range is now also taken from the ceiling
+    effect fitted alone; within it the thrust scale does not pay and goes."""
+    import tests.independent_sim as sim
+    from tests.independent_cases import CEILING_CLOSE
+
+    monkeypatch.setattr(sim, "MASS", 1.5)
+    truth = {"radius": 0.1006, "offset": 0.012}
+    rows = fly({"ceiling": (truth["radius"], truth["offset"])}, duration=120.0, rate_hz=100.0, seed=7944,
+               waypoints=2.2, **CEILING_CLOSE)
+    found = _discover(write(rows, tmp_path / "ceiling.csv", seed=7944, wall=False, ceiling=True))
+    assert found.names_ == ["ceiling_effect"]
+    summary = found.form_range_
+    assert summary["applied"] and summary["on_all"]["ceiling_effect"]["radius"] > 2.0 * truth["radius"]
+    assert summary["changed"][0]["from"] == ["ceiling_effect[distance_offset]", "thrust_scale"]
+    assert found.effects_[0].values["radius"] == pytest.approx(truth["radius"], rel=0.03)
+    assert found.effects_[0].values["offset"] == pytest.approx(truth["offset"], rel=0.15)
+
+
 def test_a_vehicle_drawn_onto_the_ceiling_is_left_out_as_held_at_the_ceiling_not_as_ground_contact(tmp_path,
                                                                                                     monkeypatch):
     """Where the image-rotor gain levels off only at 0.3 radii (up to 3.3 times the thrust), a survey 8 cm under the
