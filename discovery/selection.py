@@ -35,7 +35,8 @@ The literature's fuller forms (:data:`VARIANTS`: wall suction scaled by rotor th
 ground and ceiling effects with the distance offset) are candidates of their own
 (keys such as ``ground_effect[distance_offset]``), judged by the same score, at most
 one form per effect, tried in a round only where the plain form improves the model,
-and kept only when their extra parameters are determined. Quadratic
+and kept only when their extra parameters are determined (and some entry of a vector
+main parameter: :func:`_form_determined`). Quadratic
 drag on the air-relative velocity with a fitted steady wind (``quadratic_drag[wind]``)
 looks like a steady force plus drag, so it is tried after the selection in place of
 any chosen subset of :data:`WIND_REPLACES`, and kept where it scores better; the
