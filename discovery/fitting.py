@@ -30,7 +30,7 @@ apart carry nearly the same information); :meth:`EffectFit.out_of_fold` gives th
 held-out residual of a result at every sample for the reported figures.
 Standard errors are Newey-West's sandwich at the solution (:meth:`EffectFit._standard_errors`):
 each axis keeps its own noise level, and residual rows are correlated over the smoothing
-window.
+window, or longer where what the fit leaves is still correlated beyond it (:func:`influence_lags`).
 
 :class:`Fitter` owns every fit of one run: the effects' terms (evaluated once per
 parameter value and shared by every set they appear in) and each candidate set's fit,
@@ -52,7 +52,7 @@ from discovery.terms import EffectTerm, Term
 from wall_env.effects import Effect, make_effect
 
 __all__ = ["CV_TOL", "STARTS", "EffectFit", "FitResult", "Candidate", "Fitter", "applicable",
-           "term_key", "hac_lags"]
+           "term_key", "hac_lags", "influence_lags", "long_run_variance", "SLOW_CORRELATION_SIGMAS"]
 
 # Starting points for effects whose force is not affine in their parameters (plausible
 # physical values; the fit is bounded by each parameter's range from the library).
@@ -82,6 +82,57 @@ def applicable(effect: Effect, data: FlightData) -> bool:
 def hac_lags(segment) -> int:
     """Lags (in fit rows) of the Newey-West sum: :meth:`~discovery.residuals.Segment.hac_lags`."""
     return segment.hac_lags()
+
+
+#: an entry's influence counts as still correlated one lag window apart (a turbulent wind, a gust: a force the
+#: effects leave that lasts seconds) when its correlation there is this many times what white residuals would show
+SLOW_CORRELATION_SIGMAS = 3.0
+
+
+def influence_lags(influence: list[np.ndarray], windows: list[int]) -> list[np.ndarray]:
+    """Newey-West lags (fit rows, ``(entries,)`` per segment) for the influence of each fitted entry on each row
+    (``(rows, entries)`` per segment); ``windows``: each segment's :meth:`~discovery.residuals.Segment.hac_lags`.
+
+    An entry whose influence one window apart is correlated beyond :data:`SLOW_CORRELATION_SIGMAS` times its
+    standard error on white residuals (``1 / sqrt(rows / window)``, pooled over the segments) gets Andrews' (1991)
+    AR(1) plug-in bandwidth for the Bartlett kernel, ``1.1447 (alpha T)^(1/3)`` with
+    ``alpha = 4 rho^2 / ((1 - rho)^2 (1 + rho)^2)``, ``rho`` the correlation per row that decays to the one
+    measured a window apart, and ``T`` the segment's rows; every other entry keeps the window. The smoothing alone
+    correlates rows within a window, never beyond, so on what an effect's fit leaves as white noise nothing
+    changes, while a 2 s turbulent wind left in the residual of a 50 Hz log (its correlation a window apart
+    about 0.7) is summed over about 7 s.
+    """
+    size = influence[0].shape[1]
+    near, total, independent = np.zeros(size), np.zeros(size), 0.0
+    for u, window in zip(influence, windows):
+        if len(u) > window:
+            near += np.sum(u[window:] * u[:-window], axis=0)
+        total += np.sum(u * u, axis=0)
+        independent += len(u) / window
+    rho = np.divide(near, total, out=np.zeros(size), where=total > 0)
+    slow = rho > SLOW_CORRELATION_SIGMAS / np.sqrt(max(independent, 1.0))
+    out = []
+    for u, window in zip(influence, windows):
+        lags = np.full(size, float(window))
+        if slow.any():
+            per_row = np.clip(rho[slow], 0.0, 0.999) ** (1.0 / window)
+            alpha = 4.0 * per_row**2 / ((1.0 - per_row) ** 2 * (1.0 + per_row) ** 2)
+            lags[slow] = np.clip(1.1447 * (alpha * len(u)) ** (1.0 / 3.0), window, max(len(u) - 1, window))
+        out.append(np.floor(lags))
+    return out
+
+
+def long_run_variance(influence: list[np.ndarray], lags: list[np.ndarray]) -> np.ndarray:
+    """Variance of each column's sum over all rows (``(rows, entries)`` per segment, segments independent): the
+    Newey-West sum within each segment, with Bartlett weights ``1 - l / (L + 1)`` up to each entry's ``L`` of
+    ``lags`` (:func:`influence_lags`)."""
+    variance = np.zeros(influence[0].shape[1])
+    for u, seg_lags in zip(influence, lags):
+        variance += np.sum(u * u, axis=0)
+        for lag in range(1, min(int(seg_lags.max()), len(u) - 1) + 1):
+            weight = np.where(lag <= seg_lags, 1.0 - lag / (seg_lags + 1.0), 0.0)
+            variance += 2.0 * weight * np.sum(u[lag:] * u[:-lag], axis=0)
+    return variance
 
 
 def make_term(data: FlightData, effect: Effect) -> Term:
@@ -284,33 +335,31 @@ class EffectFit:
         """Heteroscedasticity- and autocorrelation-consistent (Newey-West) standard errors of the ``free`` entries.
 
         ``cov = A^-1 B A^-1`` with ``A = J^T J`` and ``B`` the long-run covariance of the
-        per-row scores ``g_k = J_k^T r_k`` (all three axes of a row together), summed over
-        lags up to :meth:`~discovery.residuals.Segment.hac_lags` with Bartlett weights,
-        within each segment. Unlike ``sigma^2 (J^T J)^-1`` this lets each axis have its own
-        noise level (a vertical parameter is not credited with the quieter horizontal axes)
-        and lets the noise be correlated over the smoothing window.
+        per-row scores ``g_k = J_k^T r_k`` (all three axes of a row together). An entry's variance is the long-run
+        variance of its influence ``u_k = (A^-1 g_k)_i``, summed with Bartlett weights within each segment over
+        :func:`influence_lags`: two smoothing windows (:meth:`~discovery.residuals.Segment.hac_lags`), or longer
+        where what the fit leaves is still correlated beyond them. Unlike ``sigma^2 (J^T J)^-1`` this lets each axis
+        have its own noise level (a vertical parameter is not credited with the quieter horizontal axes) and lets
+        the noise be correlated over the smoothing window, or over a turbulent wind's seconds.
         """
         p = int(free.sum())
         if p == 0:
             return np.zeros(0)
         residuals, jacobians = self.residuals(theta), self._jacobians(theta)
         a = np.zeros((p, p))
-        b = np.zeros((p, p))
         n = 0
-        for seg, r, j, mask in zip(self.data.segments, residuals, jacobians, masks):
+        scores = []
+        for r, j, mask in zip(residuals, jacobians, masks):
             j = j[:, :, free]
             rows = j[mask].reshape(-1, p)
             a += rows.T @ rows
             n += rows.shape[0]
-            scores = np.einsum("ma,map->mp", r * mask[:, None], j)
-            b += scores.T @ scores
-            lags = seg.hac_lags()
-            for lag in range(1, min(lags, len(scores) - 1) + 1):
-                c = scores[lag:].T @ scores[:-lag]
-                b += (1.0 - lag / (lags + 1.0)) * (c + c.T)
+            scores.append(np.einsum("ma,map->mp", r * mask[:, None], j))
         a_inv = np.linalg.pinv(a)
-        cov = a_inv @ b @ a_inv * n / max(n - p, 1)
-        return np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        influence = [g @ a_inv for g in scores]  # A^-1 symmetric: each row's pull on each entry
+        windows = [seg.hac_lags() for seg in self.data.segments]
+        variance = long_run_variance(influence, influence_lags(influence, windows))
+        return np.sqrt(np.clip(variance * n / max(n - p, 1), 0.0, None))
 
     # ------------------------------------------------------------------ cross-validation
     def cross_validate(self, full: FitResult) -> tuple[list[np.ndarray], list[np.ndarray]]:

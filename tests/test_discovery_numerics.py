@@ -179,6 +179,37 @@ def test_standard_errors_match_the_spread_over_noise_seeds():
     assert np.all(np.abs(np.mean(estimates, axis=0)) < 3 * spread / np.sqrt(8))  # nothing there: no bias
 
 
+def test_standard_errors_sum_a_residual_that_lasts_seconds_over_its_seconds():
+    """Two influence series of 3,000 rows: one correlated 0.99 from row to row (a force lasting about 100 rows, as a
+    turbulent wind does), one a moving average of white noise over 10 rows (the smoothing's own correlation). The
+    variance of each sum over 200 draws against the Newey-West estimate: over two windows (20 rows) the slow one's
+    is a tenth of the truth; its lags are now widened (Andrews' AR(1) bandwidth) to about three quarters of it, the
+    Bartlett kernel's own shortfall, while the quick one keeps its window and its estimate."""
+    from scipy.ndimage import uniform_filter1d
+    from scipy.signal import lfilter
+
+    from discovery.fitting import influence_lags, long_run_variance
+
+    rng = np.random.default_rng(3)
+    window = 20
+    sums, widened, narrow, lags = [], [], [], []
+    for _ in range(200):
+        noise = rng.normal(size=(3000, 2))
+        u = np.column_stack([lfilter([1.0], [1.0, -0.99], noise[:, 0]), uniform_filter1d(noise[:, 1], 10)])
+        chosen = influence_lags([u], [window])
+        lags.append(chosen[0])
+        sums.append(u.sum(axis=0))
+        widened.append(long_run_variance([u], chosen))
+        narrow.append(long_run_variance([u], [np.full(2, float(window))]))
+    truth = np.var(sums, axis=0)
+    lags_drawn = np.array(lags)
+    assert np.all(lags_drawn[:, 0] > 5 * window) and np.all(lags_drawn[:, 1] == window)
+    assert np.mean(narrow, axis=0)[0] < 0.15 * truth[0]
+    assert 0.6 * truth[0] < np.mean(widened, axis=0)[0] < 1.1 * truth[0]
+    assert np.allclose(np.array(widened)[:, 1], np.array(narrow)[:, 1])
+    assert 0.7 * truth[1] < np.mean(widened, axis=0)[1] < 1.1 * truth[1]
+
+
 @pytest.mark.parametrize("logged", ["at the row, under its command", "over the step before the row", "centred"])
 def test_an_accelerometer_is_read_at_the_instant_its_samples_stand_for(logged):
     """A vertical climb and descent under a thrust command held over each 20 ms step, with linear drag: the exact
