@@ -93,7 +93,7 @@ def loose_parameters(effects: list[Effect], stds: list[dict]) -> list[dict]:
             if sizes[i] <= 0.0:
                 continue
             share = interval_share(float(sizes[i]), float(error[i]))
-            if np.isfinite(share) and share > NARROW_INTERVAL_SHARE:
+            if np.isfinite(error[i]) and share > NARROW_INTERVAL_SHARE:  # inf share: the interval reaches zero
                 index = i if p.size > 1 else None
                 out.append({"effect": effect.name, "parameter": p.entry_name(i),
                             "value": float(value[i]), "std": float(error[i]), "interval_95_share": share,

@@ -56,11 +56,14 @@ Keys:
 ``form_range``
     ``null``, or, when a ground or ceiling effect was kept and the flight came nearer the surface than its
     form is trusted (:mod:`discovery.form_range`): the share and seconds of samples set aside, the parameters
-    fitted on everything and (when ``applied``) without them, or why the fit on everything was kept.
+    fitted on everything and (when ``applied``) without them, or why the fit on everything was kept; ``added``
+    names such an effect that the fit on every sample had left out and that was taken in within that range.
 ``loose``
     the written parameters the flight pins only loosely (:func:`discovery.determination.loose_parameters`): each
     entry whose 95 % interval allows an error of more than 10 % of the parameter's true value, as ``{"effect",
-    "parameter", "value", "std", "interval_95_share", "manoeuvre"}``, the manoeuvre being the one that narrows it.
+    "parameter", "value", "std", "interval_95_share", "manoeuvre"}``, the manoeuvre being the one that narrows it
+    (``interval_95_share`` null where the interval reaches zero: a standard error widened after the parameter was
+    found determined, by a motor lag found beside it).
 ``vehicle_fields``
     where each field of the model file's vehicle came from: given in the vehicle block, derived from it,
     found (a motor lag), or defaulted (the paper vehicle's value; the log says nothing about it).
@@ -238,8 +241,10 @@ def format_summary(report: dict[str, Any]) -> str:
             lines.append(f"found {e['name']}: {params}; acts {place or 'nowhere'}; explains "
                          f"{100 * e['explained_fraction']:.0f} % of the held-out residual")
             for loose in (x for x in report.get("loose") or [] if x["effect"] == e["name"]):
-                lines.append(f"  the flight determines {loose['parameter']} only to "
-                             f"+-{100 * loose['interval_95_share']:.0f} % (95 % interval); to narrow it: "
+                share = loose["interval_95_share"]  # None (not finite) where the interval reaches zero
+                extent = "not even to its sign (its 95 % interval reaches zero)" if share is None else \
+                    f"only to +-{100 * share:.0f} % (95 % interval)"
+                lines.append(f"  the flight determines {loose['parameter']} {extent}; to narrow it: "
                              f"{loose['manoeuvre']}")
     lag = report.get("motor_lag")
     if lag and lag["kept"]:

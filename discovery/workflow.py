@@ -648,7 +648,7 @@ class Discovery:
                      selection: Selection) -> Candidate:
         """``final`` with its ground or ceiling effect fitted where the image-rotor form is trusted
         (:mod:`discovery.form_range`), finished again when that changed it; the report says what was set aside."""
-        if selection.fitter is None or not final.names:
+        if selection.fitter is None:
             return final
         within, hold, self.form_range_ = fit_within_form(selection.fitter, final, self._hold, data, self.regressors_,
                                                          selection.n_eff, self._say)
@@ -663,6 +663,11 @@ class Discovery:
                  f"a rotor within {FORM_TRUSTED_FROM_RADII:g} effective radius of {surfaces}{closest}, where how the "
                  "gain levels off is the form's guess")
         on_all = "; ".join(f"{name} {_params_text(params)}" for name, params in summary["on_all"].items())
+        if summary.get("added"):
+            # what was said of it when it was left out no longer holds: it is written
+            self.undetermined_ = [c for c in self.undetermined_ if c["effect"] != summary["added"]]
+            self.notes_.append(f"{summary['added']} added where its form is trusted: fitted there it is determined and "
+                               f"scores better than the model without it; on every sample it had been left out")
         if summary["applied"]:
             self.notes_.append(f"{names} fitted without the samples nearer {surfaces} than its form is trusted: "
                                f"{aside}; fitted on them too it would be {on_all}")
@@ -672,6 +677,8 @@ class Discovery:
                                               "(about 0.1 m to 0.5 m)"})
         for change in summary["changed"]:
             gone = [k for k in change["from"] if k not in change["to"]]
+            if not gone:  # an effect only added is said above
+                continue
             came = {effect_name(k): k for k in change["to"] if k not in change["from"]}
             said = [f"{k} in the form {came[effect_name(k)]}" if effect_name(k) in came else f"without {k}"
                     for k in gone]

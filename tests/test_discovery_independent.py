@@ -663,3 +663,29 @@ def test_a_turbulent_wind_lasting_seconds_is_not_written_as_a_thrust_scale(tmp_p
     assert scale and 0.98 < scale[0]["value"] < 0.995
     assert scale[0]["value"] - 1.96 * scale[0]["std"] < 1.0 < scale[0]["value"] + 1.96 * scale[0]["std"]
     assert found.unexplained_["lives_in"].startswith("time")
+
+
+def test_a_ground_effect_left_out_beside_a_thrust_scale_is_taken_in_where_its_form_is_trusted(tmp_path, monkeypatch):
+    """Flown 8-18 cm over the ground by a simulator whose gain levels off at 0.9 of the 0.106 m radius (the library's
+    at half of it), the gain is flat over the lower part of the flight: on every sample a thrust scale of 1.054 was
+    chosen first, the ground effect beside it ran to its 0.5 m bound and was left out, and the thrust scale was
+    written (seed 7957 of the second simulator). The ground effect is now fitted alone within the range its form is
+    trusted, where it is determined and scores better than the thrust scale, which no longer pays there."""
+    import tests.independent_sim as sim
+    from discovery.report import format_summary
+    from tests.independent_cases import GROUND
+
+    monkeypatch.setattr(sim, "GAIN_FLOOR_RADII", 0.9)
+    radius = 0.10587
+    rows = fly({"ground": (radius, 0.0)}, duration=60.0, rate_hz=100.0, seed=7957, **GROUND)
+    found = _discover(write(rows, tmp_path / "ground.csv", seed=7957, wall=False))
+    assert found.names_ == ["ground_effect"]
+    assert found.effects_[0].values["radius"] == pytest.approx(radius, rel=0.01)
+    summary = found.form_range_
+    assert summary["added"] == "ground_effect" and summary["applied"]
+    assert summary["on_all"]["ground_effect"]["radius"] < 0.97 * radius  # alone on every sample, the flat gain bends it
+    assert 0.2 < summary["share_set_aside"] < 0.6
+    assert not found.undetermined_  # what was said of it when it was left out is gone
+    text = format_summary(found.report())
+    assert "ground_effect added where its form is trusted" in text
+    assert found.unexplained_["where"]["regressor"] == "height above ground"  # what the form leaves nearer
