@@ -70,18 +70,16 @@ def _share(near: list[np.ndarray]) -> float:
     return float(sum(int(n.sum()) for n in near) / total) if total else 0.0
 
 
+def _held_out_axes(candidate: Candidate, near: list[np.ndarray]) -> np.ndarray:
+    """Held-out mean squared force residual per world axis (N^2) on the rows fitted on (those not ``near``)."""
+    rows = np.concatenate([r[~n] for r, n in zip(candidate.cv_residual, near)])
+    return np.mean(rows**2, axis=0) if rows.size else np.zeros(3)
+
+
 def _score(candidate: Candidate, near: list[np.ndarray], n_eff: float) -> float:
     """:func:`~discovery.selection.score` on the held-out residual of the rows fitted on, with the effective sample
     count scaled to their share."""
-    rows = np.concatenate([r[~n] for r, n in zip(candidate.cv_residual, near)])
-    axes = np.mean(rows**2, axis=0) if rows.size else np.zeros(3)
-    return score(axes, candidate.n_params, n_eff * (1.0 - _share(near)))
-
-
-def _held_out_energy(candidate: Candidate, near: list[np.ndarray]) -> float:
-    """Held-out mean squared force residual (N^2, summed over the axes) on the rows fitted on."""
-    rows = np.concatenate([r[~n] for r, n in zip(candidate.cv_residual, near)])
-    return float(np.sum(np.mean(rows**2, axis=0))) if rows.size else 0.0
+    return score(_held_out_axes(candidate, near), candidate.n_params, n_eff * (1.0 - _share(near)))
 
 
 def _fixed_point(fitter: Fitter, keys: list[str], start: Candidate, near: list[np.ndarray],
@@ -198,7 +196,7 @@ def _left_out_surface(fitter: Fitter, final: Candidate, hold: dict[str, dict[int
         if open_cases(current, held) or _score(current, near, n_eff) >= _score(before, near, n_eff):
             continue
         # and, as selection asks of any effect, a material share of the gap and a material force (within the range)
-        left, had = _held_out_energy(current, near), _held_out_energy(before, near)
+        left, had = float(np.sum(_held_out_axes(current, near))), float(np.sum(_held_out_axes(before, near)))
         if had - left < MIN_SHARE * had or np.sqrt(max(had - left, 0.0)) < MIN_WEIGHT_SHARE * data.weight:
             continue
         return current, near, alone

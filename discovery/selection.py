@@ -639,7 +639,9 @@ def _form_determined(candidate: Candidate, key: str) -> bool:
         extra_seen = extra_seen or \
             sum(1 for c in cases if c["name"] in {p.name for p in extra}) < sum(p.size for p in extra)
         main_seen = main_seen or sum(1 for c in cases if c["name"] == main.name) < main.size
-    return extra_seen and main_seen
+        if extra_seen and main_seen:
+            return True
+    return False
 
 
 def _backward(fitter: Fitter, current: Candidate, material) -> tuple[Candidate, list[str]]:
