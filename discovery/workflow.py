@@ -79,6 +79,7 @@ from discovery.prediction import DEFAULT_HORIZON_S, DEFAULT_STRIDE_S, prediction
 from discovery.regressors import describe_force, localise_residual, piecewise_linear, regressors
 from discovery.residuals import DEFAULT_BLOCK_S, DEFAULT_WINDOW_S, FlightData, prepare
 from discovery.selection import (
+    MIN_SHARE,
     MIN_WEIGHT_SHARE,
     Selection,
     effect_name,
@@ -682,6 +683,11 @@ class Discovery:
             came = {effect_name(k): k for k in change["to"] if k not in change["from"]}
             said = [f"{k} in the form {came[effect_name(k)]}" if effect_name(k) in came else f"without {k}"
                     for k in gone]
+            if change.get("immaterial"):
+                self.notes_.append(f"within the range the form is trusted, {', '.join(gone)} explains less than "
+                                   f"{100 * MIN_SHARE:g} % of the force gap or {100 * MIN_WEIGHT_SHARE:g} % of the "
+                                   "weight: it only paid for itself on the samples set aside, and is left out")
+                continue
             self.notes_.append(f"within the range the form is trusted, the model {' and '.join(said)} scores better: "
                                f"{', '.join(gone)} only paid for itself on the samples set aside")
         if within is final:
