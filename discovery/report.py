@@ -57,7 +57,10 @@ Keys:
     ``null``, or, when a ground or ceiling effect was kept and the flight came nearer the surface than its
     form is trusted (:mod:`discovery.form_range`): the share and seconds of samples set aside, the parameters
     fitted on everything and (when ``applied``) without them, or why the fit on everything was kept; ``added``
-    names such an effect that the fit on every sample had left out and that was taken in within that range.
+    names such an effect that the fit on every sample had left out and that was taken in within that range;
+    ``changed`` the sets it went through (``immaterial``: an effect left out as explaining nothing material
+    there); ``leakage_shift`` how far each parameter moves when what the form leaves on the samples set aside,
+    carried into the rows fitted on by the smoothing, is taken out (counted in the standard errors).
 ``loose``
     the written parameters the flight pins only loosely (:func:`discovery.determination.loose_parameters`): each
     entry whose 95 % interval allows an error of more than 10 % of the parameter's true value, as ``{"effect",

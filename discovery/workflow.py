@@ -559,6 +559,12 @@ class Discovery:
             widened = [_with_lag_uncertainty(e, std, lag["effect_std"]) for e, std in zip(fitted, self.param_std_)]
             self.param_std_ = [std for std, _ in widened]
             self.widened_by_lag_ = {(e.name, label) for e, (_, labels) in zip(fitted, widened) for label in labels}
+        within = self.form_range_ or {}
+        for name, shift in (within.get("leakage_shift") or {}).items():
+            # the parameters as fitted within the form (not another set finished after it): their leak counts
+            self.param_std_ = [_with_shift(std, shift) if e.name == name and
+                               e.params_dict() == within["within_form"].get(name) else std
+                               for e, std in zip(fitted, self.param_std_)]
         written, self.written_notes_ = written_effects([plain_wall(e) for e in self.effects_])
         self.model_ = FlightModel(vehicle, written, _written_std(written, fitted, self.param_std_),
                                   data.vehicle.vehicle_fields(motor_lag_found=bool(lag and lag["kept"])))
@@ -672,6 +678,14 @@ class Discovery:
         if summary["applied"]:
             self.notes_.append(f"{names} fitted without the samples nearer {surfaces} than its form is trusted: "
                                f"{aside}; fitted on them too it would be {on_all}")
+            own = {e.name: std for e, std in zip(within.fit.effects, within.fit.std_dicts())}
+            for name, shift in (summary.get("leakage_shift") or {}).items():
+                if not any(abs(float(v)) > float(own.get(name, {}).get(k, np.inf)) for k, v in shift.items()):
+                    continue  # within the fit's own standard errors: said only where it widens them by sqrt 2
+                moved = ", ".join(f"{k} by {float(v):+.2g} m" for k, v in shift.items())
+                self.notes_.append(f"{name}'s parameters move ({moved}) when what the form leaves nearer than that "
+                                   "is taken out of the rows fitted on, whose force is smoothed over samples that "
+                                   "near too; their standard errors count that shift")
         else:
             self.limits_.append({"effects": summary["effects"], "reason": f"{aside}; {summary['reason']}",
                                  "manoeuvre": f"fly at several distances beyond one effective radius of {surfaces} "
@@ -1016,6 +1030,17 @@ def _with_lag_uncertainty(effect: Effect, std: dict, beside_lag: dict[str, dict]
         mostly = np.atleast_1d(wider > np.sqrt(2.0) * own)
         widened += [parameters[key].entry_name(int(i)) for i in np.flatnonzero(mostly)]
     return out, widened
+
+
+def _with_shift(std: dict, shift: dict) -> dict:
+    """Standard errors ``std`` with the shifts ``shift`` (per parameter, the same shape) added in quadrature: an
+    uncertainty the fit's own errors do not hold (:func:`discovery.form_range.leakage_shift`)."""
+    out = dict(std)
+    for key, moved in shift.items():
+        if key in std:
+            wider = np.hypot(np.asarray(std[key], dtype=float), np.asarray(moved, dtype=float))  # NaN (held) stays
+            out[key] = wider.tolist() if np.ndim(wider) else float(wider)
+    return out
 
 
 def _written_std(written: list[Effect], fitted: list[Effect], stds: list[dict]) -> dict[str, dict]:
