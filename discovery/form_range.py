@@ -280,7 +280,8 @@ def leakage_shift(fitter: Fitter, current: Candidate, near: list[np.ndarray], ho
     leaves on samples nearer the surface. Where the gain levels off just inside the range (0.7-0.9 of the radius)
     that bends the parameters: flown 2-15 cm under a ceiling levelling off at 0.8 of its 0.078 m radius, the offset
     came out 14 mm for 12 mm at a standard error of 0.45 mm. Removed, it moves by 2.9 mm. The leak is estimated
-    roughly (it can overshoot by about half), so the shift is not taken as a correction: it is counted as an
+    roughly (it overshoots: that offset went from 14.6 % large to 9.6 % small, and a ceiling offset levelling off at
+    0.9 radii from 11 % large to 63 % small), so the shift is not taken as a correction: it is counted as an
     uncertainty of the parameters (:class:`discovery.workflow.Discovery` adds it to their standard errors)."""
     from discovery.fitting import Fitter
 
