@@ -247,3 +247,32 @@ def test_an_accelerometer_is_read_at_the_instant_its_samples_stand_for(logged):
     centred = kernel.step_average(0.5 * (a[1:] + a[:-1])[:, None] - means[:, None])[100:-100]
     if logged == "at the row, under its command":
         assert np.abs(centred).max() > 0.05 * drag_acceleration
+
+
+def test_what_the_form_leaves_nearer_than_its_range_leaks_into_a_sample_with_its_kernel_weight_there():
+    """The force the smoothing carries into a sample from samples nearer a surface than the form is trusted
+    (:func:`discovery.form_range._leaked`): all of what the form leaves there for a window wholly inside, none for a
+    window wholly outside, half at the edge of the range (the derivative's step weights are symmetric)."""
+    from types import SimpleNamespace
+
+    from discovery.form_range import _leaked
+
+    t = np.arange(0.0, 20.0, 0.01)  # 100 Hz
+    kernel = LocalPolynomial(t, window_s=1.0)
+    segment = SimpleNamespace(n=len(t), fit_rows=np.arange(0, len(t), kernel.window // 10), kernel=kernel,
+                              step_weights=lambda: kernel.interior["step"])
+    distance = np.linspace(0.2, 0.0, len(t))  # m: the rotor closes on the ceiling at 1 cm/s
+    ceiling = SimpleNamespace(name="ceiling_effect", params_dict=lambda: {"radius": 0.1, "offset": 0.0})
+    near = [distance[segment.fit_rows] < 0.1]  # nearer than one radius from t = 10 s
+    left = -0.2  # N, vertical: what the form leaves there
+    residual = np.zeros((len(segment.fit_rows), 3))
+    residual[near[0], 2] = left
+    current = SimpleNamespace(fit=SimpleNamespace(effects=[ceiling]), cv_residual=[residual])
+    leaked = _leaked(current, near, SimpleNamespace(segments=[segment]),
+                     [SimpleNamespace(name="distance to ceiling", values=distance)])
+    assert leaked is not None
+    edge = int(np.argmax(distance < 0.1))
+    assert np.sum(kernel.interior["step"]) == pytest.approx(1.0)
+    assert leaked[0][edge + kernel.window] == pytest.approx(left)
+    assert leaked[0][edge - kernel.window] == pytest.approx(0.0, abs=1e-12)
+    assert leaked[0][edge] == pytest.approx(left / 2, rel=0.02)
