@@ -286,17 +286,17 @@ def leakage_shift(fitter: Fitter, current: Candidate, near: list[np.ndarray], ho
     from discovery.fitting import Fitter
 
     corrected = current
-    for _ in range(LEAKAGE_ROUNDS):
+    for round_ in range(LEAKAGE_ROUNDS):
         leaked = _leaked(corrected, near, data, regressors)
         if leaked is None:
             return {}
         target = [r - np.outer(c, [0.0, 0.0, 1.0]) for r, c in zip(fitter.r_nom, leaked)]
         refit = Fitter(data, target, fitter.templates, fitter.scorer).candidate(
             list(current.names), previous=current.previous(), hold=hold, exclude=near)
-        # its residual on the measured force, from which the next round takes what the form leaves
-        corrected = fitter.candidate(list(current.names), previous=refit.previous(), exclude=near,
-                                     hold={k: dict(enumerate(np.atleast_1d(v).ravel())) for k, v
-                                           in refit.previous().items()})
+        if round_ + 1 < LEAKAGE_ROUNDS:  # its residual on the measured force, from which the next round takes the leak
+            corrected = fitter.candidate(list(current.names), previous=refit.previous(), exclude=near,
+                                         hold={k: dict(enumerate(np.atleast_1d(v).ravel())) for k, v
+                                               in refit.previous().items()})
     return {e.name: {k: (np.asarray(v, dtype=float) - np.asarray(e.params_dict()[k], dtype=float)).tolist()
                      for k, v in moved.params_dict().items()}
             for e, moved in zip(current.fit.effects, refit.fit.effects) if e.name in SURFACE_DISTANCE}

@@ -66,7 +66,7 @@ Keys:
     entry whose 95 % interval allows an error of more than 10 % of the parameter's true value, as ``{"effect",
     "parameter", "value", "std", "interval_95_share", "manoeuvre"}``, the manoeuvre being the one that narrows it
     (``interval_95_share`` null where the interval reaches zero: a standard error widened after the parameter was
-    found determined, by a motor lag found beside it).
+    found determined, by a motor lag found beside it or by the smoothing's leak of ``form_range.leakage_shift``).
 ``vehicle_fields``
     where each field of the model file's vehicle came from: given in the vehicle block, derived from it,
     found (a motor lag), or defaulted (the paper vehicle's value; the log says nothing about it).
