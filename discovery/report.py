@@ -59,8 +59,11 @@ Keys:
     fitted on everything and (when ``applied``) without them, or why the fit on everything was kept; ``added``
     names such an effect that the fit on every sample had left out and that was taken in within that range;
     ``changed`` the sets it went through (``immaterial``: an effect left out as explaining nothing material
-    there); ``leakage_shift`` how far each parameter moves when what the form leaves on the samples set aside,
-    carried into the rows fitted on by the smoothing, is taken out (counted in the standard errors).
+    there); ``set_aside_misfit`` how much worse the fit on everything predicts the samples set aside than the rest
+    (``ratio`` of their vertical mean squares, the ``limit`` sampling allows, and ``forms_kept``: within it the
+    ground or ceiling effect keeps the form chosen on every sample); ``leakage_shift`` how far each parameter moves
+    when what the form leaves on the samples set aside, carried into the rows fitted on by the smoothing, is taken
+    out (counted in the standard errors).
 ``loose``
     the written parameters the flight pins only loosely (:func:`discovery.determination.loose_parameters`): each
     entry whose 95 % interval allows an error of more than 10 % of the parameter's true value, as ``{"effect",

@@ -678,6 +678,13 @@ class Discovery:
         if summary["applied"]:
             self.notes_.append(f"{names} fitted without the samples nearer {surfaces} than its form is trusted: "
                                f"{aside}; fitted on them too it would be {on_all}")
+            misfit = summary.get("set_aside_misfit") or {}
+            if misfit.get("forms_kept"):
+                forms = ", ".join(k for k in final.names if effect_name(k) in summary["effects"])
+                self.notes_.append(f"fitted on every sample, {forms} predicts the samples set aside about as well as "
+                                   f"the rest (their vertical mean square {misfit['ratio']:.2f} times, sampling "
+                                   f"allows {misfit['limit']:.2f}): the gain levels off there as the form says, so "
+                                   "its form stays as chosen on every sample")
             own = {e.name: std for e, std in zip(within.fit.effects, within.fit.std_dicts())}
             for name, shift in (summary.get("leakage_shift") or {}).items():
                 if not any(abs(float(v)) > float(own.get(name, {}).get(k, np.inf)) for k, v in shift.items()):

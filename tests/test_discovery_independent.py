@@ -731,3 +731,42 @@ def test_a_thrust_scale_that_explains_nothing_material_within_the_trusted_range_
     assert -0.006 < shift < -0.0015  # taken out, it moves toward the 12 mm flown
     assert abs(shift) < std < abs(shift) + 0.001  # counted beside the fit's own error (about 0.5 mm), in quadrature
     assert ("ceiling_effect", "offset") in {(x["effect"], x["parameter"]) for x in report["loose"]}
+
+
+def test_a_distance_offset_whose_form_describes_the_samples_set_aside_is_kept_within_the_trusted_range(
+        tmp_path, monkeypatch):
+    """Flown 4.6 cm to about 14 cm over the ground by a 0.7 kg vehicle with 0.15 m arms, whose gain levels off at 0.55 of its
+    0.084 m radius (the library's at half of it) behind a 12 mm distance offset (seed 7966 of the second simulator,
+    noise x1.5, an accelerometer, its world turned and shifted): fitted on every sample the offset form is right
+    (radius 0.084 m, offset 12.2 mm), but within the trusted range (54 % of the flight) the plain form scored better
+    by less than the offset's price, and it was written with its radius 11 % small at a standard error of 1 %.
+
+    The offset form fitted on every sample predicts the samples set aside as well as the rest (their vertical mean
+    square 0.98 times): it was not chosen for their sake, so within the range its form stays. The offset is pinned
+    only loosely there, and said so."""
+    import math
+
+    import tests.independent_sim as sim
+    from discovery.report import format_summary
+    from tests.independent_cases import GROUND_CLOSE
+
+    monkeypatch.setattr(sim, "GAIN_FLOOR_RADII", 0.55)
+    monkeypatch.setattr(sim, "MASS", 0.7)
+    monkeypatch.setattr(sim, "NOISE_SCALE", 1.5)
+    monkeypatch.setattr(sim, "ROTORS_BODY", sim.rotor_layout(0.15))
+    monkeypatch.setattr(sim, "ACCELEROMETER", True)
+    monkeypatch.setattr(sim, "WORLD_TURN", math.radians(300.0))
+    monkeypatch.setattr(sim, "WORLD_SHIFT", (1.2, -0.4))
+    radius = 0.0837083
+    rows = fly({"ground": (radius, 0.012)}, duration=360.0, rate_hz=50.0, seed=7966, waypoints=1.3, **GROUND_CLOSE)
+    found = _discover(write(rows, tmp_path / "ground.csv", seed=7966, wall=False))
+    assert found.names_ == ["ground_effect"]
+    values = found.effects_[0].values
+    assert "offset" in values  # the plain form was written before
+    assert values["radius"] == pytest.approx(radius, rel=0.05)
+    misfit = found.form_range_["set_aside_misfit"]
+    assert misfit["forms_kept"] and 0.8 < misfit["ratio"] < 1.2 < misfit["limit"]
+    assert found.form_range_["changed"] == []
+    report = found.report()
+    assert ("ground_effect", "offset") in {(x["effect"], x["parameter"]) for x in report["loose"]}
+    assert "the gain levels off there as the form says" in format_summary(report)
