@@ -14,7 +14,8 @@ term linear in its coefficients, along the residual's main direction): piecewise
 the localising quantity (zero where a force of that quantity vanishes: far from a surface
 the flight stays near, at rest for a velocity; away from surfaces a force that depends on
 where the vehicle is keeps its level, so a steady force equal to its mean is one of its
-shapes), one mean per cell of the position map, a sinusoid at its spectrum's peak, or
+shapes; the level is the description's own along every axis, unless a steady force is fitted
+beside it), one mean per cell of the position map, a sinusoid at its spectrum's peak, or
 piecewise-linear in time (knots :data:`TIME_KNOT_S` apart, without its mean: a steady force
 is the same at every time). Then the held-out scores decide, every parameter priced
 (:func:`test_effect`): when the description in the effect's place scores better, and the
@@ -68,7 +69,9 @@ class Structure(Effect):
     name = "unexplained_structure"
     description = "a shape-free description of what the model leaves (nuisance)"
     parameters = (Parameter("c", "N", 0.0, -1e4, 1e4, "coefficients of the basis forces"),)
-    options = {"size": 1, "label": "", "zero": False}  # zero: the description is zero where its force vanishes
+    # zero: the description is zero where its force vanishes; direction: the world direction of its shape (with the
+    # label and size, what tells one description's term from another's in a fitter's cache)
+    options = {"size": 1, "label": "", "zero": False, "direction": (0.0, 0.0, 1.0)}
 
     basis: list[np.ndarray]
 
@@ -121,7 +124,8 @@ def _split(data: FlightData, values: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def structures_for(data: FlightData, where: dict, candidates: list[Regressor], effect: str = "") -> list[Structure]:
+def structures_for(data: FlightData, where: dict, candidates: list[Regressor], effect: str = "",
+                   steady_beside: bool = False, residual: np.ndarray | None = None) -> list[Structure]:
     """The :class:`Structure` descriptions of the residual that lives where ``where`` says, coarsest first: against a
     state, piecewise linear with each of :data:`STATE_KNOTS` knots (a force linear in height is two knots, and eight
     priced it out of replacing the thrust map that stood in for it); elsewhere the one of :func:`structure_for`.
@@ -130,23 +134,39 @@ def structures_for(data: FlightData, where: dict, candidates: list[Regressor], e
     against each distance to a surface (:data:`PLACE_QUANTITIES`) that the form of ``effect`` (the one asked about)
     does not depend on, as a state. A force growing with height, which a heavier vehicle's climb and descent left
     in the map's cells once its thrust map was taken out, took twenty-odd cell means to describe there, and the
-    thrust map that stood in for it was written; two knots in height describe it."""
+    thrust map that stood in for it was written; two knots in height describe it.
+
+    ``steady_beside``: a steady force is among the effects the description is fitted beside, and gives it its level
+    along every axis (:func:`structure_for`). ``residual`` (``(samples, 3)`` N, the one ``where`` describes): a
+    description against a distance for a residual that lives in the position map has its shape along the direction
+    in which the residual varies with that distance (:func:`_varies_along`), not along the residual's main direction:
+    a force growing with height, its vertical part taken by a thrust map beside it, left a residual mostly along x."""
     if where["lives_in"] == "states":
-        found = [structure_for(data, where, candidates, knots=k) for k in STATE_KNOTS]
+        found = [structure_for(data, where, candidates, knots=k, steady_beside=steady_beside) for k in STATE_KNOTS]
     else:
-        found = [structure_for(data, where, candidates)]
+        found = [structure_for(data, where, candidates, steady_beside=steady_beside)]
     if where["lives_in"] == "position":
         for reg in candidates:
             if reg.name.startswith(PLACE_QUANTITIES) and not depends_on(effect, reg.name):
                 along = {**where, "lives_in": "states", "states": {"regressor": reg.name}}
-                found += [structure_for(data, along, candidates, knots=k) for k in STATE_KNOTS]
+                if residual is not None:
+                    along["direction_world"] = _varies_along(reg, residual) or where.get("direction_world")
+                found += [structure_for(data, along, candidates, knots=k, steady_beside=steady_beside)
+                          for k in STATE_KNOTS]
     return [s for s in found if s is not None]
 
 
-def structure_for(data: FlightData, where: dict, candidates: list[Regressor], knots: int = _KNOTS) -> Structure | None:
+def structure_for(data: FlightData, where: dict, candidates: list[Regressor], knots: int = _KNOTS,
+                  steady_beside: bool = False) -> Structure | None:
     """A :class:`Structure` for the residual that lives where ``where`` (:func:`discovery.unexplained.where_it_lives`)
     says (against a state, piecewise linear with ``knots`` knots at its quantiles), or None when it lives nowhere in
-    particular."""
+    particular.
+
+    A description against a state or the position map has a level of its own along every world axis, unless
+    ``steady_beside``: a steady force fitted beside it is that level, and a second copy would only be priced. A force
+    growing with height, flown slowly by a 2.4 kg vehicle under 2.5 times the noise, was described as well by two
+    knots in height as by the affine thrust map and vertical steady force standing in for it, but with three
+    parameters more to pay for (the steady force's three and the level's), and the thrust map was written."""
     lives = where["lives_in"]
     if lives == "states":
         reg = next((r for r in candidates if r.name == where["states"].get("regressor")), None)
@@ -203,17 +223,35 @@ def structure_for(data: FlightData, where: dict, candidates: list[Regressor], kn
     else:
         return None
     direction = np.asarray(where.get("direction_world") or (0.0, 0.0, 1.0), dtype=float)
-    basis = _along(columns, direction / np.linalg.norm(direction))
+    unit = direction / np.linalg.norm(direction)
+    basis = _along(columns, unit)
     zero = lives == "states" and "zero at" in label
     if lives in ("states", "position") and not zero:
         # its level is its own, along every world axis (the residual's main direction is only estimated): the
-        # shape along that direction less one of its functions (they sum to one), and a constant per axis
-        level = np.zeros((len(columns), 3, 3))
-        level[:, 0, 0] = level[:, 1, 1] = level[:, 2, 2] = 1.0
+        # shape along that direction less one of its functions (they sum to one), and a constant per axis unless
+        # a steady force beside it is that constant
+        level = np.zeros((len(columns), 3, 0 if steady_beside else 3))
+        if steady_beside:
+            label += ", its level the steady force's"
+        else:
+            level[:, 0, 0] = level[:, 1, 1] = level[:, 2, 2] = 1.0
         basis = np.concatenate([basis[:, :, :-1], level], axis=2)
-    structure = Structure(size=basis.shape[2], label=label, zero=zero)
+    structure = Structure(size=basis.shape[2], label=label, zero=zero,
+                          direction=tuple(round(float(x), 6) for x in unit))
     structure.basis = _split(data, basis)
     return structure
+
+
+def _varies_along(reg: Regressor, residual: np.ndarray) -> list[float] | None:
+    """The unit world direction of the covariance of ``residual`` (``(samples, 3)`` N) with ``reg``'s values, over
+    the samples where they are known; ``None`` when it vanishes."""
+    x = np.asarray(reg.values, dtype=float)
+    known = np.isfinite(x) & np.all(np.isfinite(residual), axis=1)
+    if known.sum() < 2:
+        return None
+    covariance = (x[known] - x[known].mean()) @ (residual[known] - residual[known].mean(axis=0))
+    size = float(np.linalg.norm(covariance))
+    return (covariance / size).tolist() if size > 0.0 else None
 
 
 def _vanishes_at(reg: Regressor, values: np.ndarray) -> float | None:

@@ -95,6 +95,7 @@ from discovery.thrust_map import ThrustMap, written_effects
 from discovery.unexplained import is_unexplained, where_it_lives
 from discovery.wall_extent import BoundedWall, find_edge, plain_wall, side_gains
 from wall_env.effects import EFFECTS, Effect, make_effect
+from wall_env.effects.constant_force import ConstantForce
 from wall_env.effects.ground import FORM_TRUSTED_FROM_RADII
 from wall_env.model_file import FlightModel
 
@@ -604,7 +605,9 @@ class Discovery:
                 where = where_it_lives(data, residual, self.regressors_, self.noise_, self.unexplained_threshold)
                 if own_quantity(final.fit.effects[i], where):
                     continue
-                structures = structures_for(data, where, self.regressors_, final.fit.effects[i].name)
+                steady = any(e.name == ConstantForce.name for j, e in enumerate(final.fit.effects) if j != i)
+                structures = structures_for(data, where, self.regressors_, final.fit.effects[i].name, steady,
+                                            residual)
                 if not structures:
                     continue
                 self._say(f"asking whether {key} only stands in for a residual that {where['lives_in']} describes")

@@ -285,6 +285,35 @@ def test_a_force_growing_with_height_that_a_heavier_vehicle_leaves_in_the_positi
     assert slope * np.sign(shape["direction_world"][2]) == pytest.approx(-0.76, rel=0.2)
 
 
+def test_a_force_growing_with_height_is_not_written_when_a_steady_force_stands_beside_its_thrust_map(
+        tmp_path, monkeypatch):
+    """-0.65 N per metre of height flown slowly by a 2.4 kg vehicle with rotors 0.22 m out, under 2.5 times the
+    noise, its heading swinging 80 degrees (seed 7973 of the second simulator): an affine thrust map (scale 1.29,
+    offset -7.3 N) and a vertical steady force stood in for it. Two knots in height described the residual better
+    than the thrust map, but were priced for a level of their own along every axis on top of the steady force's,
+    and lost by 13.8; the thrust map was written. The steady force beside the description is its level."""
+    import math
+
+    import tests.independent_sim as sim
+    from tests.independent_cases import TALL
+
+    monkeypatch.setattr(sim, "MASS", 2.4)
+    monkeypatch.setattr(sim, "NOISE_SCALE", 2.5)
+    monkeypatch.setattr(sim, "ROTORS_BODY", sim.rotor_layout(0.22))
+    monkeypatch.setattr(sim, "ACCELEROMETER", True)
+    monkeypatch.setattr(sim, "YAW_SWING", (math.radians(80.0), 12.0))
+    found = Discovery().fit(read_log(_log(tmp_path, "height", {"height_force": 0.6486}, 7973, flight=TALL,
+                                          duration=60.0, waypoints=0.6)))
+    assert found.names_ == [] and found.model_.effects == []
+    assert {s["effect"] for s in found.stand_ins_} == {"thrust_scale", "constant_force"}
+    assert any("piecewise linear in height above ground (2 knots)" in s["reason"] for s in found.stand_ins_)
+    left = found.unexplained_
+    assert left["where"]["regressor"] == "height above ground"
+    shape = left["shape"]
+    slope = (shape["force_N_at_knots"][-1] - shape["force_N_at_knots"][0]) / (shape["knots"][-1] - shape["knots"][0])
+    assert slope * np.sign(shape["direction_world"][2]) == pytest.approx(-0.6486, rel=0.2)
+
+
 def _wall_ending_at_1_2_m(tmp_path, name, truth, seed, flight, **kwargs):
     """Discovery fitted on a 60 s flight near a wall whose suction is ``truth`` and which ends 1.2 m up."""
     path = _log(tmp_path, name, {"suction": (truth["k_s"], truth["d_thr"]), "wall_top": 1.2}, seed, flight=flight,
@@ -456,3 +485,22 @@ def test_effects_that_cancel_near_hover_are_reported_as_look_alikes(tmp_path):
     limit = next(x for x in found.limits_ if sorted(x["effects"]) == ["constant_force", "thrust_scale"]
                  and "cancel each other" in x["reason"])
     assert "kept: the kept effects" in limit["reason"]
+
+
+def test_a_residual_varies_with_a_distance_along_the_direction_of_their_covariance_not_its_main_one():
+    """A vertical force of -0.7 N per metre of height beside a larger sideways force that has nothing to do with the
+    height: the residual's main direction is x, but it varies with the height along z, and a description against
+    the height is shaped along z (to the chance covariance of the sideways force with the height, about 0.07 of the
+    vertical one over 4000 samples)."""
+    from discovery.regressors import Regressor
+    from discovery.standins import _varies_along
+
+    rng = np.random.default_rng(7)
+    height = rng.uniform(0.5, 2.0, 4000)
+    height[:10] = np.nan  # samples without a height are left out
+    residual = np.column_stack([2.0 * np.sin(np.linspace(0.0, 40.0, 4000)), np.zeros(4000),
+                                -0.7 * np.nan_to_num(height, nan=1.0)]) + rng.normal(0.0, 0.05, (4000, 3))
+    direction = _varies_along(Regressor("height above ground", "m", height), residual)
+    assert np.allclose(np.abs(direction), [0.0, 0.0, 1.0], atol=0.15)
+    assert direction[2] < 0  # the force falls as the height grows
+    assert _varies_along(Regressor("height above ground", "m", np.full(4000, 1.0)), residual) is None
