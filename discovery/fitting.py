@@ -482,8 +482,12 @@ class Fitter:
         self._fits: dict[tuple, Candidate] = {}
 
     def add(self, key: str, template: Effect) -> None:
+        """Register ``template`` under ``key``; one that replaces another drops the fits and the term made of that
+        one (a term is cached by the effect's name and options, which two descriptions of different residuals with
+        the same label share: the second had been fitted with the first's basis)."""
         if key in self.templates and self.templates[key] is not template:
             self._fits = {k: v for k, v in self._fits.items() if key not in k[0]}
+            self.terms.pop(term_key(self.templates[key]), None)
         self.templates[key] = template
 
     def problem(self, keys: list[str], exclude: list[np.ndarray] | None = None) -> EffectFit:
