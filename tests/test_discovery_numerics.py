@@ -276,3 +276,31 @@ def test_what_the_form_leaves_nearer_than_its_range_leaks_into_a_sample_with_its
     assert leaked[0][edge + kernel.window] == pytest.approx(left)
     assert leaked[0][edge - kernel.window] == pytest.approx(0.0, abs=1e-12)
     assert leaked[0][edge] == pytest.approx(left / 2, rel=0.02)
+
+
+def test_a_template_added_again_under_its_key_is_fitted_with_its_own_term(noise_free_ground_flight):
+    """Terms are cached by an effect's name and options. Two shape-free descriptions with the same label (one along z,
+    one along x) share them; the second, added under the first's key, had been fitted with the first's basis. Fitted
+    in the fitter that held the first, it now gives what a fresh fitter gives."""
+    from discovery.selection import make_fitter
+    from discovery.standins import Structure
+
+    log, _ = noise_free_ground_flight
+    data = prepare([log])
+    r_nom = data.residuals(data.nominal_model)
+
+    def described(axis: int) -> Structure:
+        structure = Structure(size=1, label="a steady force")
+        structure.basis = [np.eye(3)[axis][None, :, None].repeat(seg.n, axis=0) for seg in data.segments]
+        return structure
+
+    fitter = make_fitter(data, r_nom, {})
+    fitter.add("structure", described(2))
+    vertical = float(fitter.candidate(["structure"]).fit.theta[0])
+    fitter.add("structure", described(0))
+    again = float(fitter.candidate(["structure"]).fit.theta[0])
+    fresh = make_fitter(data, r_nom, {})
+    fresh.add("structure", described(0))
+    sideways = float(fresh.candidate(["structure"]).fit.theta[0])
+    assert abs(vertical - sideways) > 0.1  # the ground effect's lift against what is left sideways
+    assert again == pytest.approx(sideways, abs=1e-9)
