@@ -140,8 +140,8 @@ def _set_aside_misfit(candidate: Candidate, near: list[np.ndarray], n_eff: float
     share = _share(near)
     if not 0.0 < share < 1.0:
         return None
-    near_ms, within_ms = (float(np.mean(np.concatenate([r[m, 2] ** 2 for r, m in zip(candidate.cv_residual, rows)])))
-                          for rows in (near, [~n for n in near]))
+    near_ms = float(_held_out_axes(candidate, [~n for n in near])[2])  # the rows that are not within the range
+    within_ms = float(_held_out_axes(candidate, near)[2])
     spread = float(np.sqrt(2.0 / (n_eff * share) + 2.0 / (n_eff * (1.0 - share))))
     return near_ms / max(within_ms, 1e-300), float(np.exp(DESCRIBED_SIGMAS * spread))
 
