@@ -91,15 +91,15 @@ NEAR_WALL = {"kp": [20.0, 6.0, 12.0], "kd": [8.0, 4.0, 6.0], "ki": [2.0, 1.0, 4.
 
 
 def _R(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q
+    w, x, y, z = q.tolist()  # Python floats: the same arithmetic as numpy's scalars, without their overhead
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
+    w1, x1, y1, z1 = a.tolist()
+    w2, x2, y2, z2 = b.tolist()
     return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
                      w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
 
@@ -136,7 +136,7 @@ def _on_wall(effects: dict, at: np.ndarray) -> bool:
 
 
 def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: float = 0.0,
-                 produced: float = 0.0) -> np.ndarray:
+                 produced: float = 0.0, rotors_world: list | None = None) -> np.ndarray:
     """World force (N) of ``effects`` besides the thrust map:
 
     ``suction`` (k_s, d_thr) of a wall at x = 0 with normal +x (``wall_top``: the wall ends at that height, a rotor
@@ -145,12 +145,14 @@ def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: 
     ``wind_force`` (3,); ``gust`` (amplitude (3,), frequency Hz): a periodic force; ``quadratic_drag`` (C (3,), wind
     (3,)); ``linear_drag`` (D (3,), body axes); ``height_force`` k (N/m): ``-k z`` along world z, growing with
     height; ``ground`` (radius, offset) and ``ceiling`` (radius, offset): the image-rotor gain of each rotor's share
-    of the ``produced`` thrust near the ground (z = 0) and under the ceiling (z = :data:`CEILING_Z`)."""
+    of the ``produced`` thrust near the ground (z = 0) and under the ceiling (z = :data:`CEILING_Z`).
+    ``rotors_world``: the rotor centres ``p + R r`` when the caller has them already."""
+    if rotors_world is None:
+        rotors_world = [p + R @ rotor for rotor in ROTORS_BODY]
     force = np.zeros(3)
     if "suction" in effects:
         k_s, d_thr = effects["suction"]
-        for rotor in ROTORS_BODY:
-            at = p + R @ rotor
+        for at in rotors_world:
             if _on_wall(effects, at):
                 force[0] -= k_s * max(0.0, d_thr - max(at[0], 0.0))
                 if SECOND_WALL_X is not None:
@@ -172,8 +174,8 @@ def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: 
         if key in effects:
             radius, offset = effects[key]
             extra = 0.0
-            for rotor in ROTORS_BODY:
-                distance = abs((p + R @ rotor)[2] - surface)
+            for at in rotors_world:
+                distance = abs(at[2] - surface)
                 extra += (_image_gain(radius, distance, offset) - 1.0) * produced / 4.0
             force += extra * R[:, 2]
     return force
@@ -190,22 +192,27 @@ def _pressed_surface(depth: float, v: np.ndarray, axis: int, away: float) -> np.
     return force
 
 
-def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, disturbance: np.ndarray,
-                motor_lag: float, t: float, contact: bool) -> tuple:
-    """d/dt of (p, v, q, w, produced thrust) with the thrust and rate command held and a disturbance force (N)."""
-    p, v, q, w, produced = state
-    R = _R(q / np.linalg.norm(q))
+_GRAVITY_WORLD = np.array([0.0, 0.0, GRAVITY])
+
+
+def _derivative(state: np.ndarray, effects: dict, thrust: float, w_cmd: np.ndarray, disturbance: np.ndarray,
+                motor_lag: float, t: float, contact: bool) -> np.ndarray:
+    """d/dt of the state ``(p, v, q, w, produced thrust)`` (one flat array of 14) with the thrust and rate command
+    held and a disturbance force (N)."""
+    p, v, q, w, produced = state[0:3], state[3:6], state[6:10], state[10:13], state[13]
+    R = _R(q / math.sqrt(q.dot(q)))  # numpy's norm of a vector, without its checks
     if motor_lag > 0:
         thrust_dot = (thrust - produced) / motor_lag
     else:
         produced, thrust_dot = thrust, 0.0
     produced_map = effects.get("thrust_scale", 1.0) * produced + effects.get("thrust_offset", 0.0)
-    force = produced_map * R[:, 2] + hidden_force(effects, p, v, R, t, produced) + disturbance
+    # p + R r for each rotor r (as R @ r computes it), as Python floats: only their coordinates are read
+    rotors_world = (p + np.matmul(R, ROTORS_BODY[:, :, None])[:, :, 0]).tolist()
+    force = produced_map * R[:, 2] + hidden_force(effects, p, v, R, t, produced, rotors_world) + disturbance
     if "turbulence" in effects:
         force = force + effects["turbulence"](t)
     if contact:
         force = force + _pressed_surface(REST_HEIGHT - p[2], v, axis=2, away=1.0)
-    rotors_world = [p + R @ rotor for rotor in ROTORS_BODY]
     if WALL_GUARD_RADIUS is not None:
         # a rotor above a wall's top or beyond its side passes it
         depth = WALL_GUARD_RADIUS - min((at[0] for at in rotors_world if _on_wall(effects, at)), default=math.inf)
@@ -213,8 +220,13 @@ def _derivative(state: tuple, effects: dict, thrust: float, w_cmd: np.ndarray, d
     if CEILING_GUARD_RADIUS is not None and "ceiling" in effects:
         depth = CEILING_GUARD_RADIUS - min(CEILING_Z - at[2] for at in rotors_world)
         force = force + _pressed_surface(depth, v, axis=2, away=-1.0)
-    return (v, force / MASS - np.array([0, 0, GRAVITY]), 0.5 * _qmul(q, np.array([0.0, *w])), (w_cmd - w) / _RATE_LAG,
-            thrust_dot)
+    derivative = np.empty(14)
+    derivative[0:3] = v
+    derivative[3:6] = force / MASS - _GRAVITY_WORLD
+    derivative[6:10] = 0.5 * _qmul(q, np.array([0.0, *w]))
+    derivative[10:13] = (w_cmd - w) / _RATE_LAG
+    derivative[13] = thrust_dot
+    return derivative
 
 
 def turbulence(std, time_constant: float, duration: float, seed: int):
@@ -298,14 +310,17 @@ def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: floa
         below = ground_point - np.array([0.0, 0.0, 0.05])
         return last + _smoothstep(x) * (below - last), np.zeros(3), np.zeros(3)
 
-    p, v = (ground_point.copy() if takeoff else reference(0.0)[0].copy()), np.zeros(3)
-    q, w = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3)
+    # the state (p, v, q, w, produced thrust) as one flat array, read through views of it
+    state = np.zeros(14)
+    p, v, q, w = state[0:3], state[3:6], state[6:10], state[10:13]
+    p[:] = ground_point if takeoff else reference(0.0)[0]
+    q[0] = 1.0
     integral = np.zeros(3)
     loop = {"kp": [6.0, 6.0, 12.0], "kd": [4.0, 4.0, 6.0], "ki": [1.0, 1.0, 4.0], **(gains or {})}
     kp, kd, ki = (np.asarray(loop[k], dtype=float) for k in ("kp", "kd", "ki"))
     every = int(round(1.0 / (rate_hz * _DT)))
     thrust, w_cmd = (0.0 if takeoff else MASS * GRAVITY), np.zeros(3)
-    produced = thrust
+    state[13] = thrust
     landed_at, landed_thrust = None, 0.0
     rows = []
     for i in range(int(round(total / _DT))):
@@ -330,15 +345,14 @@ def fly(effects: dict, centre, amplitude, period, duration: float, rate_hz: floa
                 if takeoff and t > end_survey + 0.5 * DESCEND_S and p[2] < REST_HEIGHT + 0.003 and abs(v[2]) < 0.05:
                     landed_at, landed_thrust = t, min(thrust, 0.9 * MASS * GRAVITY)
         inputs = (effects, thrust, w_cmd, rng.normal(0.0, force_noise, 3), motor_lag, t, takeoff)
-        state = (p, v, q, w, produced)
         k1 = _derivative(state, *inputs)
         if i % every == 0:  # the acceleration as an accelerometer feels it at this instant, disturbance and all
-            rows.append((t, p.copy(), v.copy(), q.copy(), w.copy(), thrust, w_cmd.copy(), k1[1].copy()))
-        k2 = _derivative(tuple(x + _DT / 2 * k for x, k in zip(state, k1)), *inputs)
-        k3 = _derivative(tuple(x + _DT / 2 * k for x, k in zip(state, k2)), *inputs)
-        k4 = _derivative(tuple(x + _DT * k for x, k in zip(state, k3)), *inputs)
-        p, v, q, w, produced = (x + _DT / 6 * (a + 2 * b + 2 * c + d) for x, a, b, c, d in zip(state, k1, k2, k3, k4))
-        q = q / np.linalg.norm(q)
+            rows.append((t, p.copy(), v.copy(), q.copy(), w.copy(), thrust, w_cmd.copy(), k1[3:6].copy()))
+        k2 = _derivative(state + _DT / 2 * k1, *inputs)
+        k3 = _derivative(state + _DT / 2 * k2, *inputs)
+        k4 = _derivative(state + _DT * k3, *inputs)
+        state += _DT / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        q /= np.linalg.norm(q)
     return rows
 
 
