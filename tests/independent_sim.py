@@ -135,8 +135,15 @@ def _on_wall(effects: dict, at: np.ndarray) -> bool:
     return bool(at[2] <= effects.get("wall_top", math.inf) and at[1] <= effects.get("wall_side", math.inf))
 
 
+def _rotor_centres(p: np.ndarray, R: np.ndarray) -> list[list[float]]:
+    """The rotor centres ``p + R r`` (world, m) of :data:`ROTORS_BODY`, each as ``R @ r`` computes it (a batched
+    ``matmul`` agrees with it bit for bit; ``ROTORS_BODY @ R.T`` does not), as Python floats: only their coordinates
+    are read."""
+    return (p + np.matmul(R, ROTORS_BODY[:, :, None])[:, :, 0]).tolist()
+
+
 def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: float = 0.0,
-                 produced: float = 0.0, rotors_world: list | None = None) -> np.ndarray:
+                 produced: float = 0.0, rotors_world: list[list[float]] | None = None) -> np.ndarray:
     """World force (N) of ``effects`` besides the thrust map:
 
     ``suction`` (k_s, d_thr) of a wall at x = 0 with normal +x (``wall_top``: the wall ends at that height, a rotor
@@ -146,9 +153,9 @@ def hidden_force(effects: dict, p: np.ndarray, v: np.ndarray, R: np.ndarray, t: 
     (3,)); ``linear_drag`` (D (3,), body axes); ``height_force`` k (N/m): ``-k z`` along world z, growing with
     height; ``ground`` (radius, offset) and ``ceiling`` (radius, offset): the image-rotor gain of each rotor's share
     of the ``produced`` thrust near the ground (z = 0) and under the ceiling (z = :data:`CEILING_Z`).
-    ``rotors_world``: the rotor centres ``p + R r`` when the caller has them already."""
+    ``rotors_world``: the rotor centres (:func:`_rotor_centres`) when the caller has them already."""
     if rotors_world is None:
-        rotors_world = [p + R @ rotor for rotor in ROTORS_BODY]
+        rotors_world = _rotor_centres(p, R)
     force = np.zeros(3)
     if "suction" in effects:
         k_s, d_thr = effects["suction"]
@@ -206,8 +213,7 @@ def _derivative(state: np.ndarray, effects: dict, thrust: float, w_cmd: np.ndarr
     else:
         produced, thrust_dot = thrust, 0.0
     produced_map = effects.get("thrust_scale", 1.0) * produced + effects.get("thrust_offset", 0.0)
-    # p + R r for each rotor r (as R @ r computes it), as Python floats: only their coordinates are read
-    rotors_world = (p + np.matmul(R, ROTORS_BODY[:, :, None])[:, :, 0]).tolist()
+    rotors_world = _rotor_centres(p, R)
     force = produced_map * R[:, 2] + hidden_force(effects, p, v, R, t, produced, rotors_world) + disturbance
     if "turbulence" in effects:
         force = force + effects["turbulence"](t)
