@@ -697,7 +697,11 @@ class Discovery:
                                    "is taken out of the rows fitted on, whose force is smoothed over samples that "
                                    "near too; their standard errors count that shift")
         else:
-            self.limits_.append({"effects": summary["effects"], "reason": f"{aside}; {summary['reason']}",
+            resting = [f"{name} {key}" for name, params in summary["on_all"].items() for key in params]
+            verb = "rests" if len(resting) == 1 else "rest"
+            self.limits_.append({"effects": summary["effects"],
+                                 "reason": f"{aside}; {summary['reason']}, and {' and '.join(resting)} {verb} on "
+                                           "that guess",
                                  "manoeuvre": f"fly at several distances beyond one effective radius of {surfaces} "
                                               "(about 0.1 m to 0.5 m)"})
         for change in summary["changed"]:
