@@ -62,6 +62,7 @@ from discovery.cancelling import cancelling_sets, simpler
 from discovery.cancelling import manoeuvre as cancel_manoeuvre
 from discovery.coverage import (
     NEAR_SURFACE,
+    far_surfaces,
     flight_limits,
     ground_contact,
     nearest_wall,
@@ -339,7 +340,7 @@ class Discovery:
         if not bounded or self.effect is not None or selection.fitter is None:
             return final, selection
         self._say(f"choosing the effects again without {', '.join(bounded)}, left out at a bound of its range")
-        templates = [t for t in self._templates if t.name not in set(excluded) | set(bounded)]
+        templates = [t for t in self._candidates(excluded) if t.name not in bounded]
         again = forward_selection(data, r_nom, templates, self.max_effects, progress=self._say, look_for_lag=False)
         chosen, hold, cases = refit_determined(again.fitter, again.chosen, self._say)
         if not chosen.names or chosen.score >= final.score or chosen.problem is None:
@@ -836,6 +837,13 @@ class Discovery:
         self.scene_problems_ = corrected + problems
         return data, airborne, excluded
 
+    def _candidates(self, excluded: set[str]) -> list[Effect]:
+        """The candidate effects: the templates less those ``excluded`` (on a wrong scene) and the ground or ceiling
+        effect of a surface the flight never came near (:func:`~discovery.coverage.far_surfaces`), which it cannot
+        determine."""
+        far = far_surfaces(self.regressors_)
+        return [t for t in self._templates if t.name not in excluded and t.name not in far]
+
     def _choose(self, data: FlightData, look_for_lag: bool, excluded: set[str] = frozenset()  # type: ignore[assignment]
                 ) -> tuple[list[np.ndarray], Selection]:
         """Steps 4-7 on prepared data: the nominal residual, where it is, and what explains it."""
@@ -853,8 +861,7 @@ class Discovery:
         if self.effect is not None:
             self._say(f"fitting {self.effect} only")
             return r_nom, fit_only(data, r_nom, self._template(self.effect))
-        templates = [t for t in self._templates if t.name not in excluded]
-        return r_nom, forward_selection(data, r_nom, templates, self.max_effects, progress=self._say,
+        return r_nom, forward_selection(data, r_nom, self._candidates(excluded), self.max_effects, progress=self._say,
                                         look_for_lag=look_for_lag)
 
     def _suction_bound(self, selection: Selection, excluded: set[str]) -> None:

@@ -805,3 +805,28 @@ def test_a_thrust_scale_beside_a_ground_effect_flown_mostly_nearer_than_its_form
     assert summary["changed"][0]["from"] == ["ground_effect[distance_offset]", "thrust_scale"]
     assert found.effects_[0].values["radius"] == pytest.approx(truth["radius"], rel=0.03)
     assert found.effects_[0].values["offset"] == pytest.approx(truth["offset"], rel=0.1)
+
+
+def test_no_ground_effect_is_fitted_far_from_the_ground_so_a_thrust_map_standing_in_for_height_is_asked(
+        tmp_path, monkeypatch):
+    """A 2 kg vehicle (rotors in a plus, noise x1.8, an accelerometer) flies up and down between 0.7 m and 1.7 m
+    against a force growing with height, outside the library (seed 7990 of the second simulator). An affine thrust
+    map, a vertical steady force and a ground effect of radius 0.42 m were written, leaving 1.2 times the noise
+    floor; the report said at the same time that the rotors never came closer than 0.68 m to the ground, so the
+    flight could not determine a ground effect. Written, that ground effect made the height the model's own
+    quantity, and the map was never asked whether it stood in for a force of the height. Not fitted, the map and
+    the steady force are found to stand in for it, and the residual is said to depend on the height."""
+    import tests.independent_sim as sim
+    from tests.independent_cases import TALL
+
+    monkeypatch.setattr(sim, "MASS", 2.0)
+    monkeypatch.setattr(sim, "NOISE_SCALE", 1.8)
+    monkeypatch.setattr(sim, "ROTORS_BODY", sim.rotor_layout(sim.ROTOR_RADIUS, plus=True))
+    monkeypatch.setattr(sim, "ACCELEROMETER", True)
+    rows = fly({"height_force": 0.81402}, duration=60.0, rate_hz=100.0, seed=7990, **TALL)
+    found = _discover(write(rows, tmp_path / "height.csv", seed=7990, wall=False))
+    assert found.names_ == []
+    assert {s["effect"] for s in found.stand_ins_} >= {"thrust_scale"}
+    assert found.unexplained_["where"]["regressor"] == "height above ground"
+    limit = next(x for x in found.limits_ if x["effects"] == ["ground_effect"])
+    assert limit["reason"].startswith("the rotors never came closer than 0.6") and "not fitted" in limit["reason"]
