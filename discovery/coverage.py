@@ -172,7 +172,7 @@ def far_surfaces(regressors: list) -> dict[str, float]:
     closest approach (m): such a flight cannot determine them, so they are not candidates.
 
     A 2 kg vehicle flown up and down between 0.7 m and 1.7 m against a force growing with height was given a ground
-    effect of radius 0.42 m (2 % of the thrust at 0.7 m): its gain, a function of the height, bent an affine thrust
+    effect of radius 0.42 m (2.4 % of the thrust at 0.7 m): its gain, a function of the height, bent an affine thrust
     map to the force, and with the ground effect written the height was the model's own quantity, so the map was never
     asked whether it stood in for a force of the height."""
     out = {}

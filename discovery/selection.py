@@ -272,8 +272,8 @@ def forward_selection(data: FlightData, r_nom: list[np.ndarray], candidates: lis
             if not scored and not current.names and AFFINE_MAP in remaining and \
                     AFFINE_MAP not in {t["name"] for t in tried}:
                 # from the nominal model, a thrust scale and a steady force that cancel near hover pay only together:
-                # so may the map. Not later: beside a linear drag, the map stood in for a motor lag the lag's own
-                # fit comes after, and bent it from 58.6 ms to 64.4 ms (57.7 ms flown)
+                # so may the map. Not later: beside a linear drag the map stood in for a motor lag, whose own fit
+                # comes after the effects are chosen, and bent it from 58.6 ms to 64.4 ms (57.7 ms flown)
                 ask(AFFINE_MAP, current, tried, scored, helpful)
             tried.sort(key=lambda r: r["score"])
             if not scored:

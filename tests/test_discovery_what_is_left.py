@@ -473,7 +473,7 @@ def test_effects_that_cancel_near_hover_are_reported_as_look_alikes(tmp_path):
     and the brisk flight tells them apart (its tilt separates a world-vertical force from the body-z thrust), so
     both are kept; the report names them as effects that cancel, with the manoeuvre that separates them.
 
-    Neither pays alone (the thrust scale explains 2 % of the gap), so the first round asks the affine thrust map,
+    Neither pays alone (the thrust scale explains 1.9 % of the gap), so the first round asks the affine thrust map,
     which describes both near hover. Before, a ground effect of radius 0.33 m fitted 0.59 m and more above the
     ground had opened the way, and without it nothing was found."""
     effects = {"thrust_scale": 1.2, "wind_force": [0.0, 0.0, -0.2 * WEIGHT]}
