@@ -183,8 +183,9 @@ def far_surfaces(regressors: list) -> dict[str, float]:
     return out
 
 
-def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
-    """Effects this flight cannot determine, each ``{"effects", "reason", "manoeuvre"}``."""
+def flight_limits(regressors: list, thrust: np.ndarray, asked: str | None = None) -> list[dict]:
+    """Effects this flight cannot determine, each ``{"effects", "reason", "manoeuvre"}``; ``asked``: the one effect
+    the user asked to fit, which is fitted even on a surface the flight never came near."""
     values = {r.name: r.values for r in regressors}
     out = []
 
@@ -205,8 +206,8 @@ def flight_limits(regressors: list, thrust: np.ndarray) -> list[dict]:
                         "manoeuvre": f"give {surface}_z in the scene and fly within {NEAR_SURFACE:g} m of it"})
         elif effect in far:
             out.append({"effects": [effect],
-                        "reason": f"the rotors never came closer than {far[effect]:.2f} m to the {surface}: not "
-                                  "fitted",
+                        "reason": f"the rotors never came closer than {far[effect]:.2f} m to the {surface}"
+                                  + ("" if effect == asked else ": not fitted"),
                         "manoeuvre": f"hover at several heights within {NEAR_SURFACE:g} m of the {surface}"})
     for axis in "xyz":
         v = values.get(f"velocity along body {axis}")

@@ -850,7 +850,8 @@ class Discovery:
         nominal = FlightModel(data.vehicle.to_vehicle_params(), [])
         r_nom = data.residuals(nominal.aero_model())
         self.regressors_ = regressors(data)
-        self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]))
+        self.limits_ = flight_limits(self.regressors_, data.concat([seg.thrust for seg in data.segments]),
+                                     self.effect)
         self.limits_ += self._contact_limits
 
         # 4: residual and where it is

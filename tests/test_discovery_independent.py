@@ -824,9 +824,14 @@ def test_no_ground_effect_is_fitted_far_from_the_ground_so_a_thrust_map_standing
     monkeypatch.setattr(sim, "ROTORS_BODY", sim.rotor_layout(sim.ROTOR_RADIUS, plus=True))
     monkeypatch.setattr(sim, "ACCELEROMETER", True)
     rows = fly({"height_force": 0.81402}, duration=60.0, rate_hz=100.0, seed=7990, **TALL)
-    found = _discover(write(rows, tmp_path / "height.csv", seed=7990, wall=False))
+    path = write(rows, tmp_path / "height.csv", seed=7990, wall=False)
+    found = _discover(path)
     assert found.names_ == []
     assert {s["effect"] for s in found.stand_ins_} >= {"thrust_scale"}
     assert found.unexplained_["where"]["regressor"] == "height above ground"
     limit = next(x for x in found.limits_ if x["effects"] == ["ground_effect"])
     assert limit["reason"].startswith("the rotors never came closer than 0.6") and "not fitted" in limit["reason"]
+    # asked for by name, it is fitted all the same, and the limit does not say otherwise
+    asked = Discovery(effect="ground_effect").fit([read_log(path)])
+    limit = next(x for x in asked.limits_ if x["effects"] == ["ground_effect"])
+    assert limit["reason"].startswith("the rotors never came closer than 0.6") and "not fitted" not in limit["reason"]
